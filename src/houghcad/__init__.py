@@ -1,0 +1,23 @@
+"""houghcad: recognise geometric primitives in 3-D point clouds with Hough transforms."""
+
+from __future__ import annotations
+
+from .errors import InputError
+from .result import Result, Segment
+
+__version__ = "0.1.0"
+
+__all__ = ["InputError", "Result", "Segment", "segment", "Segmenter", "read_points", "__version__"]
+
+
+def __getattr__(name: str):
+    # Lazy: importing the package must stay cheap (numba compiles on first use).
+    if name in ("segment", "Segmenter"):
+        from . import pipeline
+
+        return getattr(pipeline, name)
+    if name == "read_points":
+        from .io import read_points
+
+        return read_points
+    raise AttributeError(name)

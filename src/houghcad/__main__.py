@@ -1,0 +1,7 @@
+"""``python -m houghcad``: same as the ``houghcad`` console script."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

@@ -1,0 +1,271 @@
+"""Command-line interface: ``houghcad segment | demo | evaluate``.
+
+Exit codes: 0 success, 2 bad input or usage (one line on stderr, prefixed
+``houghcad: error:``, no traceback), 130 interrupted.  Any other exception is
+a bug and propagates with its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.resources
+import json
+import math
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+from . import __version__
+from .errors import InputError
+from .io import PointCloud, read_points, write_fit4cad_primitives, write_json
+from .report import summary_table
+
+__all__ = ["main", "build_parser"]
+
+PROG = "houghcad"
+DEMO_DIR_DEFAULT = "houghcad-demo"
+
+
+class _UsageError(Exception):
+    """Bad command line; reported like an InputError."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser that raises instead of printing usage and exiting."""
+
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(f"{message} (see '{self.prog} --help')")
+
+
+# --------------------------------------------------------------------------- argument types
+
+
+def _fraction(text: str) -> float:
+    """``--epsilon``: a fraction of the bounding-box diagonal, 0 < F < 1."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and 0.0 < value < 1.0):
+        raise argparse.ArgumentTypeError(f"{text} is not a fraction of the diagonal in (0, 1), e.g. 0.01")
+    return value
+
+
+def _seed(text: str) -> int:
+    """``--seed``: a non-negative integer (numpy's requirement)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+# --------------------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``houghcad`` argument parser with its three subcommands."""
+    parser = _Parser(
+        prog=PROG,
+        description="Recognise planes, cylinders, cones, spheres and tori in 3-D point clouds "
+        "of mechanical parts with Hough transforms.",
+    )
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser("segment", help="segment a point cloud into primitives",
+                       description="Segment a point cloud (PLY, XYZ/TXT/CSV/PTS, NPY, OBJ, OFF, STL "
+                       "or Fit4CAD text) and write the result as JSON.")
+    p.add_argument("input", metavar="INPUT", help="point-cloud file")
+    p.add_argument("-o", "--output", metavar="RESULT.json",
+                   help="result file (default: <input stem>_segments.json in the current directory)")
+    p.add_argument("--families", default="simple", metavar="LIST",
+                   help="'simple', 'all' or comma-separated names, e.g. plane,cylinder (default: simple)")
+    p.add_argument("--epsilon", type=_fraction, default=None, metavar="F",
+                   help="distance tolerance as a fraction of the bounding-box diagonal "
+                   "(default: per-family values)")
+    p.add_argument("--seed", type=_seed, default=0, metavar="N", help="random seed (default: 0)")
+    p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
+                   help="normal estimation when the file has none (default: auto)")
+    p.add_argument("--fit4cad", metavar="DIR",
+                   help="also write DIR/<input stem>_primitives.txt in the Fit4CAD ground-truth format")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=_cmd_segment)
+
+    p = sub.add_parser("demo", help="segment the example part shipped with the package",
+                       description="Segment the bundled demo part and write DIR/demo_part_segments.json.")
+    p.add_argument("-o", "--output", metavar="DIR", default=DEMO_DIR_DEFAULT,
+                   help=f"output directory (default: ./{DEMO_DIR_DEFAULT})")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("evaluate", help="compare a result with Fit4CAD ground truth",
+                       description="Print the Fit4CAD classification measures (DSC first) and MFE statistics.")
+    p.add_argument("result", metavar="RESULT.json", help="file written by 'houghcad segment'")
+    p.add_argument("ground_truth", metavar="GROUND_TRUTH",
+                   help="PCn_primitives.txt (or the cloud PCn.txt next to it)")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.set_defaults(func=_cmd_evaluate)
+    return parser
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """True when ``a`` and ``b`` name the same file (``b`` may not exist yet)."""
+    try:
+        if b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def _check_output(path: Path, inputs: Sequence[Path], *, create_parent: bool = False) -> None:
+    """Fail early, before a long run, on an output path that cannot be written."""
+    for inp in inputs:
+        if _same_file(inp, path):
+            raise InputError(f"{path}: refusing to overwrite the input file")
+    if path.is_dir():
+        raise InputError(f"{path}: cannot write output (is a directory)")
+    parent = path.parent
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"{path}: cannot write output ({parent} is not a directory)")
+    if not parent.exists() and not create_parent:
+        raise InputError(f"{path}: cannot write output (directory {parent} does not exist)")
+
+
+def _write(path: Path, writer: Callable[[Path, Any], None], payload: Any) -> None:
+    """Run an (atomic) writer; OS errors become a one-line InputError."""
+    try:
+        writer(path, payload)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write output ({exc.strerror or exc})") from None
+
+
+def _make_dir(directory: Path) -> None:
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{directory}: cannot create directory ({exc.strerror or exc})") from None
+
+
+def _run_segmentation(cloud: PointCloud, **options: Any):
+    """Call :func:`houghcad.pipeline.segment` (imported late: it compiles with numba)."""
+    from .pipeline import segment
+
+    return segment(cloud.points, cloud.normals, source=cloud.source, **options)
+
+
+def _print(text: str, quiet: bool) -> None:
+    if not quiet:
+        print(text)
+
+
+# --------------------------------------------------------------------------- commands
+
+
+def _cmd_segment(args: argparse.Namespace) -> int:
+    inp = Path(args.input)
+    out = Path(args.output) if args.output else Path.cwd() / f"{inp.stem}_segments.json"
+    prim = Path(args.fit4cad) / f"{inp.stem}_primitives.txt" if args.fit4cad else None
+
+    cloud = read_points(inp)
+    _check_output(out, [inp])
+    if prim is not None:
+        _check_output(prim, [inp, out], create_parent=True)
+
+    result = _run_segmentation(
+        cloud, families=args.families, epsilon=args.epsilon, seed=args.seed, normals_method=args.normals
+    )
+    _write(out, write_json, result.to_dict())
+    written = [out]
+    if prim is not None:
+        _make_dir(prim.parent)
+        _write(prim, write_fit4cad_primitives, [s.indices for s in result.segments])
+        written.append(prim)
+
+    _print(summary_table(result), args.quiet)
+    _print("\n".join(f"wrote {p}" for p in written), args.quiet)
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    resource = importlib.resources.files("houghcad") / "data" / "demo_part.ply"
+    if not resource.is_file():
+        raise InputError(f"{resource}: demo data file is missing from the installed package")
+    outdir = Path(args.output)
+    out = outdir / "demo_part_segments.json"
+    _check_output(out, [], create_parent=True)
+
+    with importlib.resources.as_file(resource) as path:
+        cloud = read_points(path)
+    result = _run_segmentation(cloud)
+    _make_dir(outdir)
+    _write(out, write_json, result.to_dict())
+
+    _print(summary_table(result), args.quiet)
+    _print(f"wrote {out}", args.quiet)
+    return 0
+
+
+def _format_evaluation(report: dict[str, Any]) -> str:
+    """Measures (DSC first), MFE statistics and segment counts as text lines."""
+    measures = report["measures"]
+    order = ["DSC"] + [k for k in measures if k != "DSC"]
+    lines = [f"{name:<5}{float(measures[name]):8.4f}" for name in order if name in measures]
+    mfe = report.get("mfe", {})
+    if mfe:
+        lines.append("MFE  " + "  ".join(f"{k} {float(v):.3e}" for k, v in mfe.items()))
+    if "n_gt" in report and "n_pred" in report:
+        lines.append(f"segments: {report['n_gt']} in ground truth, {report['n_pred']} predicted")
+    return "\n".join(lines)
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .evaluate import evaluate_files
+
+    report = evaluate_files(args.result, args.ground_truth)
+    if args.json:
+        measures = report["measures"]
+        ordered = {"DSC": measures["DSC"], **measures} if "DSC" in measures else measures
+        print(json.dumps({**report, "measures": ordered}, indent=2, default=float))
+    else:
+        print(_format_evaluation(report))
+    return 0
+
+
+# --------------------------------------------------------------------------- entry point
+
+
+def _error(message: str) -> None:
+    # One line, whatever the message contained.
+    print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the exit code (0, 2 for bad input/usage, 130 on Ctrl-C)."""
+    parser = build_parser()
+    try:
+        try:
+            args = parser.parse_args(argv)
+        except _UsageError as exc:
+            _error(str(exc))
+            return 2
+        except SystemExit as exc:  # --help / --version print, then "exit"
+            return exc.code if isinstance(exc.code, int) else 0
+        return args.func(args)
+    except InputError as exc:
+        _error(str(exc))
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,40 @@
+"""Primitive families, one file each, behind the protocol of :mod:`.base`.
+
+Adding a family is adding one file that subclasses :class:`Family`, decorates
+it with :func:`register`, and is imported here.
+"""
+
+from __future__ import annotations
+
+from ..errors import InputError
+from .base import REGISTRY, Family, Placement, Primitive, register
+from . import plane, cylinder, sphere, cone, torus  # noqa: F401  (registration)
+
+SIMPLE = ("plane", "cylinder", "cone", "sphere", "torus")
+
+
+def select(families) -> list[Family]:
+    """Families named by ``"simple"``, ``"all"``, a comma-separated string or a list."""
+    if families is None:
+        families = "simple"
+    if isinstance(families, str):
+        names = [f.strip().lower() for f in families.split(",") if f.strip()]
+    else:
+        names = [str(f).strip().lower() for f in families]
+    out: list[str] = []
+    for n in names:
+        if n == "simple":
+            out += [f for f in SIMPLE]
+        elif n == "all":
+            out += list(REGISTRY)
+        elif n in REGISTRY:
+            out.append(n)
+        else:
+            raise InputError(f"unknown family {n!r} (known: simple, all, {', '.join(REGISTRY)})")
+    if not out:
+        raise InputError("no family selected")
+    seen = dict.fromkeys(out)
+    return [REGISTRY[n] for n in seen]
+
+
+__all__ = ["REGISTRY", "SIMPLE", "Family", "Placement", "Primitive", "register", "select"]

@@ -1,0 +1,211 @@
+"""The family protocol.
+
+A family is one file: a subclass of :class:`Family` registered with
+:func:`register`. It states its parameters and provides
+
+- ``placements``: the standard-form estimation (rigid frames in which the
+  family has at most three unknowns), from the points' normals;
+- ``region``: the box T of its standard-form unknowns, from the geometry;
+- ``gamma``: samples of the Hough transform Γ_P of every point;
+- ``primitive``: the primitive of a cell, back in the cloud's frame;
+- ``distance`` / ``surface_normals``: point-to-surface geometry;
+- ``fit``: least-squares refinement on inliers;
+- ``to_world`` and ``descriptors``.
+
+Everything a family computes before ``to_world`` is in the cloud's
+*standard* frame (see :mod:`houghcad.preprocess`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..hough import Grid
+from ..preprocess import Similarity
+
+
+@dataclass
+class Placement:
+    """A rigid frame putting a point set in a family's standard form.
+
+    ``x_local = (x - origin) @ R.T``; the standard form's axis is local z.
+    """
+
+    R: np.ndarray
+    origin: np.ndarray
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def local(self, P: np.ndarray, N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points and normals (n, 3) in the local frame."""
+        return (P - self.origin) @ self.R.T, N @ self.R.T
+
+    @property
+    def axis(self) -> np.ndarray:
+        return self.R[2]
+
+
+@dataclass
+class Primitive:
+    """A primitive of some family, with named parameters in the standard frame."""
+
+    family: str
+    params: dict[str, Any]
+
+    def copy(self) -> "Primitive":
+        return Primitive(self.family, {k: (np.array(v) if isinstance(v, np.ndarray) else v)
+                                       for k, v in self.params.items()})
+
+
+class Family:
+    """Base class of primitive families (see module docstring)."""
+
+    name: ClassVar[str] = ""
+    #: Names of the parameters reported in world coordinates.
+    param_names: ClassVar[tuple[str, ...]] = ()
+    #: Number of unknowns voted in standard form.
+    n_unknowns: ClassVar[int] = 1
+    #: Rank for ties: simpler families win equal fits.
+    complexity: ClassVar[int] = 0
+    #: Whether the family belongs to the ``simple`` selection.
+    simple: ClassVar[bool] = True
+    #: Whether it is sought on the whole cloud in the first round.
+    global_search: ClassVar[bool] = True
+
+    # --- standard form and voting -------------------------------------------
+    def placements(self, P: np.ndarray, N: np.ndarray, ctx) -> list[Placement]:
+        raise NotImplementedError
+
+    def region(self, Pl: np.ndarray, Nl: np.ndarray, ctx) -> Grid:
+        raise NotImplementedError
+
+    def gamma(self, Pl: np.ndarray, Nl: np.ndarray, grid: Grid, ctx) -> tuple[np.ndarray, np.ndarray]:
+        """Samples of Γ_P: (voter index (k,), parameter vectors (k, d))."""
+        raise NotImplementedError
+
+    def primitive(self, values: np.ndarray, placement: Placement) -> Primitive | None:
+        raise NotImplementedError
+
+    # --- geometry -----------------------------------------------------------
+    def distance(self, prim: Primitive, P: np.ndarray) -> np.ndarray:
+        """Euclidean distance of points (n, 3) to the surface, shape (n,)."""
+        raise NotImplementedError
+
+    def surface_normals(self, prim: Primitive, P: np.ndarray) -> np.ndarray:
+        """Unit surface normal at the foot of each point (n, 3)."""
+        raise NotImplementedError
+
+    def fit(self, prim: Primitive, P: np.ndarray, N: np.ndarray) -> Primitive | None:
+        """Least-squares refinement on inliers; None when degenerate."""
+        return prim
+
+    def valid(self, prim: Primitive, ctx) -> bool:
+        """Reject degenerate shapes (radii beyond the model's size...)."""
+        return True
+
+    # --- output -------------------------------------------------------------
+    def to_world(self, prim: Primitive, T: Similarity) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def descriptors(self, prim: Primitive) -> dict[str, float]:
+        """Position-independent descriptors (standard units)."""
+        return {}
+
+
+REGISTRY: dict[str, Family] = {}
+
+
+def register(cls: type[Family]) -> type[Family]:
+    """Class decorator adding a family to the registry."""
+    REGISTRY[cls.name] = cls()
+    return cls
+
+
+# --- small geometric helpers shared by the families ---------------------------
+
+def unit(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, float)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+def tangent_basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors completing ``a`` to an orthonormal basis."""
+    a = unit(a)
+    h = np.eye(3)[int(np.argmin(np.abs(a)))]
+    e1 = unit(np.cross(a, h))
+    return e1, np.cross(a, e1)
+
+
+def radial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Axial coordinate h (n,), radial distance rho (n,) and radial unit vectors (n, 3)."""
+    d = P - point
+    h = d @ axis
+    v = d - h[:, None] * axis
+    rho = np.linalg.norm(v, axis=1)
+    return h, rho, v / np.where(rho > 1e-15, rho, 1.0)[:, None]
+
+
+def lines_intersection(P: np.ndarray, D: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Least-squares point closest to lines x = P_i + t D_i (unit D).
+
+    Returns the point (3,) and the conditioning (smallest/largest eigenvalue of
+    the normal matrix; near 0 when the lines are (nearly) parallel).
+    """
+    w = np.ones(len(P)) if w is None else w
+    A = np.eye(3)[None] - D[:, :, None] * D[:, None, :]
+    M = np.einsum("n,nij->ij", w, A)
+    b = np.einsum("n,nij,nj->i", w, A, P)
+    ev = np.linalg.eigvalsh(M)
+    if ev[-1] <= 0:
+        return np.zeros(3), 0.0
+    return np.linalg.lstsq(M, b, rcond=None)[0], float(ev[0] / ev[-1])
+
+
+def planes_intersection(P: np.ndarray, Nrm: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares point on all planes n_i·(x - p_i) = 0 (apex of a cone)."""
+    M = Nrm.T @ Nrm
+    b = Nrm.T @ np.einsum("ij,ij->i", Nrm, P)
+    ev = np.linalg.eigvalsh(M)
+    if ev[-1] <= 0:
+        return np.zeros(3), 0.0
+    return np.linalg.lstsq(M, b, rcond=None)[0], float(ev[0] / ev[-1])
+
+
+def axis_from_normal_lines(P: np.ndarray, Nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Axis of a surface of revolution: the line meeting all normal lines.
+
+    Fits a linear line complex (c, c̄) to the normal lines (n_i, p_i × n_i) in
+    Plücker coordinates (Pottmann & Randrup): minimise Σ (c·(p_i×n_i) + c̄·n_i)²
+    with |c| = 1. For a surface of revolution the complex is singular (a line):
+    the axis. Points are centred first for conditioning.
+
+    Returns
+    -------
+    point : ndarray (3,), a point of the axis
+    direction : ndarray (3,), unit
+    pitch : float
+        c·c̄ / |c|²; about 0 for a surface of revolution (helical surfaces: not).
+    residual : float
+        Smallest eigenvalue per line (how well a single axis explains them).
+    """
+    m = P.mean(axis=0)
+    Q = P - m
+    L = np.hstack([np.cross(Q, Nrm), Nrm])
+    M = L.T @ L / len(P)
+    M11, M12, M22 = M[:3, :3], M[:3, 3:], M[3:, 3:]
+    try:
+        K = np.linalg.solve(M22 + 1e-12 * np.eye(3), M12.T)
+    except np.linalg.LinAlgError:
+        return m, np.array([0, 0, 1.0]), 0.0, np.inf
+    S = M11 - M12 @ K
+    w, v = np.linalg.eigh(0.5 * (S + S.T))
+    c = v[:, 0]
+    cb = -K @ c
+    pitch = float(c @ cb)
+    # Axis of the complex: point = c × c̄_0 / |c|² with the pitch part removed.
+    cb0 = cb - pitch * c
+    point = np.cross(c, cb0) + m
+    return point, c, pitch, float(max(w[0], 0.0))

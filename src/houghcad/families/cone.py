@@ -1,0 +1,121 @@
+"""Circular cones. Standard form x² + y² = a (z − b)² with a = tan² α: two
+unknowns (b, α) once the axis is along z."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..hough import Grid
+from ..preprocess import rotation_to_z
+from .base import (Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, radial,
+                   register, tangent_basis, unit)
+
+
+def cone_frame(P, N):
+    """Apex (least-squares point of the tangent planes) and axis (the rays from
+    the apex make a constant angle with it)."""
+    apex, cond = planes_intersection(P, N)
+    if cond < 1e-6:
+        return None
+    u = unit(P - apex)
+    m = u.mean(axis=0)
+    w, v = np.linalg.eigh(np.cov(u.T))
+    a = v[:, 0]
+    if a @ m < 0:
+        a = -a
+    return apex, a
+
+
+@register
+class Cone(Family):
+    name = "cone"
+    param_names = ("apex", "axis", "half_angle")
+    n_unknowns = 2
+    complexity = 3
+    global_search = False
+
+    def placements(self, P, N, ctx):
+        out = []
+        fr = cone_frame(P, N)
+        if fr is not None:
+            out.append(Placement(rotation_to_z(fr[1]), fr[0]))
+        q, a, _, _ = axis_from_normal_lines(P, N)
+        h = (P - q) @ a
+        if np.mean(h) < 0:
+            a = -a
+        out.append(Placement(rotation_to_z(a), q + a * ((P - q) @ a).min()))
+        return out
+
+    def region(self, Pl, Nl, ctx):
+        z = Pl[:, 2]
+        ext = float(np.ptp(Pl, axis=0).max())
+        lo, hi = min(z.min(), 0.0) - ext, max(z.min(), 0.0) + 0.25 * ext
+        nb = int(np.clip((hi - lo) / max(ctx.tau, 1e-6), 16, 256))
+        return Grid((lo, np.radians(1.0)), (hi, np.radians(89.0)), (nb, 176))
+
+    def gamma(self, Pl, Nl, grid, ctx):
+        # Sweep the apex height b over its bins and solve for the half-angle.
+        b = grid.centers(0)
+        rho = np.hypot(Pl[:, 0], Pl[:, 1])
+        dz = Pl[:, 2, None] - b[None, :]
+        alpha = np.arctan2(rho[:, None], dz)
+        ok = dz > 0
+        voter = np.broadcast_to(np.arange(len(Pl))[:, None], dz.shape)[ok]
+        vals = np.stack([np.broadcast_to(b, dz.shape)[ok], alpha[ok]], axis=1)
+        return voter, vals
+
+    def primitive(self, values, placement):
+        b, alpha = float(values[0]), float(values[1])
+        a = placement.R[2]
+        return Primitive("cone", {"apex": placement.origin + b * a, "axis": a.copy(), "half_angle": alpha})
+
+    def _meridian(self, prim, P):
+        h, rho, rad = radial(P, prim.params["apex"], prim.params["axis"])
+        return h, rho, rad
+
+    def distance(self, prim, P):
+        al = prim.params["half_angle"]
+        h, rho, _ = self._meridian(prim, P)
+        t = rho * np.sin(al) + h * np.cos(al)
+        d = np.abs(rho * np.cos(al) - h * np.sin(al))
+        return np.where(t >= 0, d, np.hypot(rho, h))
+
+    def surface_normals(self, prim, P):
+        al = prim.params["half_angle"]
+        _, _, rad = self._meridian(prim, P)
+        return unit(rad * np.cos(al) - np.sin(al) * prim.params["axis"][None, :])
+
+    def valid(self, prim, ctx):
+        return np.radians(2.0) < prim.params["half_angle"] < np.radians(88.0)
+
+    def fit(self, prim, P, N):
+        p0, a0, al0 = prim.params["apex"], unit(prim.params["axis"]), prim.params["half_angle"]
+        e1, e2 = tangent_basis(a0)
+
+        def unpack(x):
+            return p0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5]
+
+        def res(x):
+            p, a, al = unpack(x)
+            h, rho, _ = radial(P, p, a)
+            return rho * np.cos(al) - h * np.sin(al)
+
+        try:
+            sol = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], method="lm", max_nfev=80)
+        except Exception:
+            return None
+        p, a, al = unpack(sol.x)
+        if not (0 < al < np.pi / 2):
+            return None
+        if np.mean((P - p) @ a) < 0:
+            a = -a
+        return Primitive("cone", {"apex": p, "axis": a, "half_angle": float(al)})
+
+    def to_world(self, prim, T):
+        return {"apex": T.inv_points(prim.params["apex"]).tolist(),
+                "axis": unit(T.inv_dirs(prim.params["axis"])).tolist(),
+                "half_angle": float(prim.params["half_angle"])}
+
+    def descriptors(self, prim):
+        return {"half_angle": float(prim.params["half_angle"])}

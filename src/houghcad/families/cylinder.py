@@ -1,0 +1,140 @@
+"""Circular cylinders. Standard form x² + y² = r² (one unknown) once the axis
+is along z through the origin."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..hough import Grid, accumulate, direction_accumulator, persistent_peaks, refine_direction, smooth
+from ..preprocess import rotation_to_z
+from .base import Family, Placement, Primitive, radial, register, tangent_basis, unit
+
+
+def axis_candidates(P, N, ctx, max_dirs):
+    """Axis directions: persistent peaks of the votes n_i × n_j of neighbour
+    pairs (a cylinder's normals are all orthogonal to its axis)."""
+    out = []
+    if ctx.local:
+        # A cluster's own estimate: the direction least represented among the normals.
+        out.append(np.linalg.eigh(N.T @ N)[1][:, 0])
+    nb = ctx.neighbors
+    if nb is None or len(nb) != len(P) or nb.shape[1] < 4:
+        return out
+    k = nb.shape[1]
+    c = np.cross(N[:, None, :], N[nb[:, [k // 2, k - 1]]]).reshape(-1, 3)
+    ln = np.linalg.norm(c, axis=1)
+    ok = ln > np.sin(np.radians(1.5))
+    if ok.sum() < ctx.min_points:
+        return out
+    c = c[ok] / ln[ok, None]
+    acc = direction_accumulator()
+    H = acc.smooth(acc.vote(c))
+    dirs, _ = acc.peaks(H, ctx.persistence, max_peaks=max_dirs)
+    return out + [refine_direction(d, c, np.radians(6.0)) for d in dirs]
+
+
+def circle_centers(Q, M, ctx, max_centers):
+    """Circle centres of 2-D points Q (n, 2) with unit normals M (n, 2): each
+    point votes along its normal line (the 2-D circle vote)."""
+    lo = Q.min(axis=0)
+    hi = Q.max(axis=0)
+    ext = float((hi - lo).max())
+    if ext <= 0:
+        return np.zeros((0, 2))
+    nb = int(np.clip(ext / max(2 * ctx.tau, ctx.spacing), 16, 160))
+    cw = ext / nb
+    smax = 0.5 * ext * 1.05
+    s = np.arange(cw, smax, cw)
+    s = np.concatenate([-s, s])
+    C = (Q[:, None, :] + s[None, :, None] * M[:, None, :]).reshape(-1, 2)
+    voter = np.repeat(np.arange(len(Q)), len(s))
+    pad = 0.0
+    g = Grid((lo[0] - pad, lo[1] - pad), (lo[0] + ext + pad, lo[1] + ext + pad), (nb, nb))
+    H = smooth(accumulate(g, voter, C))
+    pk, _ = persistent_peaks(H, ctx.persistence, max_peaks=max_centers)
+    pk = pk[H.ravel()[pk] >= ctx.min_votes]
+    return g.cell_center(pk)
+
+
+@register
+class Cylinder(Family):
+    name = "cylinder"
+    param_names = ("axis_point", "axis", "radius")
+    n_unknowns = 1
+    complexity = 1
+
+    def placements(self, P, N, ctx):
+        out = []
+        for a in axis_candidates(P, N, ctx, ctx.max_directions):
+            R = rotation_to_z(a)
+            ok = np.abs(N @ a) <= np.sin(ctx.angle)
+            if ok.sum() < ctx.min_points:
+                continue
+            Q = (P[ok] @ R.T)[:, :2]
+            M = (N[ok] @ R.T)[:, :2]
+            M = M / np.maximum(np.linalg.norm(M, axis=1, keepdims=True), 1e-12)
+            cents = circle_centers(Q, M, ctx, ctx.max_peaks)
+            if ctx.local and len(Q) >= 3:
+                # Algebraic (Kåsa) circle fit as the cluster's own estimate.
+                A = np.c_[2 * Q, np.ones(len(Q))]
+                sol = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0]
+                cents = np.vstack([sol[:2][None], cents])
+            for c in cents:
+                out.append(Placement(R, R.T @ np.array([c[0], c[1], 0.0])))
+        return out
+
+    def region(self, Pl, Nl, ctx):
+        rho = np.hypot(Pl[:, 0], Pl[:, 1])
+        hi = min(float(rho.max()) + ctx.tau, ctx.max_radius)
+        w = max(ctx.tau, 1e-6)
+        return Grid((0.0,), (hi,), (int(np.clip(np.ceil(hi / w), 1, 4096)),))
+
+    def gamma(self, Pl, Nl, grid, ctx):
+        rho = np.hypot(Pl[:, 0], Pl[:, 1])
+        radial_n = np.abs(Nl[:, 0] * Pl[:, 0] + Nl[:, 1] * Pl[:, 1]) / np.maximum(rho, 1e-12)
+        idx = np.flatnonzero((radial_n >= ctx.cos_angle) & (np.abs(Nl[:, 2]) <= np.sin(ctx.angle)))
+        return idx, rho[idx, None]
+
+    def primitive(self, values, placement):
+        return Primitive("cylinder", {"axis_point": placement.origin.copy(), "axis": placement.R[2].copy(),
+                                      "radius": float(values[0])})
+
+    def distance(self, prim, P):
+        _, rho, _ = radial(P, prim.params["axis_point"], prim.params["axis"])
+        return np.abs(rho - prim.params["radius"])
+
+    def surface_normals(self, prim, P):
+        return radial(P, prim.params["axis_point"], prim.params["axis"])[2]
+
+    def valid(self, prim, ctx):
+        return 0 < prim.params["radius"] < ctx.max_radius
+
+    def fit(self, prim, P, N):
+        p0, a0, r0 = prim.params["axis_point"], unit(prim.params["axis"]), prim.params["radius"]
+        e1, e2 = tangent_basis(a0)
+
+        def unpack(x):
+            a = unit(a0 + x[0] * e1 + x[1] * e2)
+            return p0 + x[2] * e1 + x[3] * e2, a, x[4]
+
+        def res(x):
+            p, a, r = unpack(x)
+            return radial(P, p, a)[1] - r
+
+        try:
+            sol = least_squares(res, np.array([0, 0, 0, 0, r0]), method="lm", max_nfev=60)
+        except Exception:
+            return None
+        p, a, r = unpack(sol.x)
+        # Keep the axis point as the foot of the points' centroid (a stable choice).
+        h = (P.mean(axis=0) - p) @ a
+        return Primitive("cylinder", {"axis_point": p + h * a, "axis": a, "radius": float(abs(r))})
+
+    def to_world(self, prim, T):
+        return {"axis_point": T.inv_points(prim.params["axis_point"]).tolist(),
+                "axis": unit(T.inv_dirs(prim.params["axis"])).tolist(),
+                "radius": T.inv_length(prim.params["radius"])}
+
+    def descriptors(self, prim):
+        return {"radius": float(prim.params["radius"])}

@@ -1,0 +1,89 @@
+"""Spheres. Standard form x² + y² + z² = r² (one unknown) once the centre is
+at the origin."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..hough import Grid, accumulate, persistent_peaks, smooth
+from .base import Family, Placement, Primitive, lines_intersection, register, unit
+
+
+def center_votes(P, N, ctx, max_centers):
+    """Centres where many normal lines meet: each point votes along its normal line."""
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    ext = float((hi - lo).max())
+    if ext <= 0:
+        return np.zeros((0, 3))
+    c = 0.5 * (lo + hi)
+    half = 0.5 * ext * 1.5
+    nb = int(np.clip(ext / max(2 * ctx.tau, ctx.spacing), 12, 56))
+    cw = 2 * half / nb
+    s = np.arange(cw, half, cw)
+    s = np.concatenate([-s, s])
+    C = (P[:, None, :] + s[None, :, None] * N[:, None, :]).reshape(-1, 3)
+    voter = np.repeat(np.arange(len(P)), len(s))
+    g = Grid(tuple(c - half), tuple(c + half), (nb,) * 3)
+    H = smooth(accumulate(g, voter, C))
+    pk, _ = persistent_peaks(H, ctx.persistence, max_peaks=max_centers)
+    pk = pk[H.ravel()[pk] >= ctx.min_votes]
+    return g.cell_center(pk)
+
+
+@register
+class Sphere(Family):
+    name = "sphere"
+    param_names = ("center", "radius")
+    n_unknowns = 1
+    complexity = 2
+
+    def placements(self, P, N, ctx):
+        cents = list(center_votes(P, N, ctx, ctx.max_peaks))
+        if ctx.local:
+            c, cond = lines_intersection(P, N)
+            if cond > 1e-3:
+                cents.insert(0, c)
+        return [Placement(np.eye(3), np.asarray(c, float)) for c in cents]
+
+    def region(self, Pl, Nl, ctx):
+        r = np.linalg.norm(Pl, axis=1)
+        hi = min(float(r.max()) + ctx.tau, ctx.max_radius)
+        return Grid((0.0,), (hi,), (int(np.clip(np.ceil(hi / max(ctx.tau, 1e-6)), 1, 4096)),))
+
+    def gamma(self, Pl, Nl, grid, ctx):
+        r = np.linalg.norm(Pl, axis=1)
+        cos = np.abs(np.einsum("ij,ij->i", Pl, Nl)) / np.maximum(r, 1e-12)
+        idx = np.flatnonzero(cos >= ctx.cos_angle)
+        return idx, r[idx, None]
+
+    def primitive(self, values, placement):
+        return Primitive("sphere", {"center": placement.origin.copy(), "radius": float(values[0])})
+
+    def distance(self, prim, P):
+        return np.abs(np.linalg.norm(P - prim.params["center"], axis=1) - prim.params["radius"])
+
+    def surface_normals(self, prim, P):
+        return unit(P - prim.params["center"])
+
+    def valid(self, prim, ctx):
+        return 0 < prim.params["radius"] < ctx.max_radius
+
+    def fit(self, prim, P, N):
+        c0, r0 = prim.params["center"], prim.params["radius"]
+
+        def res(x):
+            return np.linalg.norm(P - x[:3], axis=1) - x[3]
+
+        try:
+            sol = least_squares(res, np.r_[c0, r0], method="lm", max_nfev=60)
+        except Exception:
+            return None
+        return Primitive("sphere", {"center": sol.x[:3], "radius": float(abs(sol.x[3]))})
+
+    def to_world(self, prim, T):
+        return {"center": T.inv_points(prim.params["center"]).tolist(),
+                "radius": T.inv_length(prim.params["radius"])}
+
+    def descriptors(self, prim):
+        return {"radius": float(prim.params["radius"])}

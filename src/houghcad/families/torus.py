@@ -1,0 +1,104 @@
+"""Tori. Standard form (√(x²+y²) − R)² + z² = r²: two unknowns (R, r) once
+the axis is along z and the centre at the origin."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..hough import Grid
+from ..preprocess import rotation_to_z
+from .base import Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
+
+
+def torus_frame(P, N):
+    """Axis from the normal lines (they all meet it); centre along the axis
+    where, in the meridian plane, the normal lines meet at (R, h0)."""
+    q, a, _, _ = axis_from_normal_lines(P, N)
+    h, rho, rad = radial(P, q, a)
+    n_rho = np.einsum("ij,ij->i", N, rad)
+    n_h = N @ a
+    # 2-D least-squares intersection of the lines (rho, h) + t (n_rho, n_h).
+    D = np.stack([n_rho, n_h], axis=1)
+    D = D / np.maximum(np.linalg.norm(D, axis=1, keepdims=True), 1e-12)
+    A = np.eye(2)[None] - D[:, :, None] * D[:, None, :]
+    M = A.sum(axis=0)
+    b = np.einsum("nij,nj->i", A, np.stack([rho, h], axis=1))
+    if np.linalg.cond(M) > 1e8:
+        return q, a, 0.0
+    R0, h0 = np.linalg.solve(M, b)
+    return q + h0 * a, a, float(R0)
+
+
+@register
+class Torus(Family):
+    name = "torus"
+    param_names = ("center", "axis", "major_radius", "minor_radius")
+    n_unknowns = 2
+    complexity = 4
+    global_search = False
+
+    def placements(self, P, N, ctx):
+        c, a, _ = torus_frame(P, N)
+        return [Placement(rotation_to_z(a), c)]
+
+    def region(self, Pl, Nl, ctx):
+        rho = np.hypot(Pl[:, 0], Pl[:, 1])
+        hi = min(float(rho.max()) + ctx.tau, ctx.max_radius)
+        nb = int(np.clip(hi / max(ctx.tau, 1e-6), 16, 200))
+        return Grid((0.0, 0.0), (hi, hi), (nb, nb))
+
+    def gamma(self, Pl, Nl, grid, ctx):
+        # Sweep the major radius over its bins and solve for the minor one.
+        R = grid.centers(0)
+        rho = np.hypot(Pl[:, 0], Pl[:, 1])
+        r = np.hypot(rho[:, None] - R[None, :], Pl[:, 2, None])
+        voter = np.repeat(np.arange(len(Pl)), len(R))
+        return voter, np.stack([np.broadcast_to(R, r.shape).ravel(), r.ravel()], axis=1)
+
+    def primitive(self, values, placement):
+        return Primitive("torus", {"center": placement.origin.copy(), "axis": placement.R[2].copy(),
+                                   "major_radius": float(values[0]), "minor_radius": float(values[1])})
+
+    def distance(self, prim, P):
+        h, rho, _ = radial(P, prim.params["center"], prim.params["axis"])
+        return np.abs(np.hypot(rho - prim.params["major_radius"], h) - prim.params["minor_radius"])
+
+    def surface_normals(self, prim, P):
+        h, rho, rad = radial(P, prim.params["center"], prim.params["axis"])
+        return unit(rad * (rho - prim.params["major_radius"])[:, None] + h[:, None] * prim.params["axis"][None, :])
+
+    def valid(self, prim, ctx):
+        p = prim.params
+        return 0 < p["minor_radius"] < ctx.max_radius and 0 <= p["major_radius"] < ctx.max_radius
+
+    def fit(self, prim, P, N):
+        c0, a0 = prim.params["center"], unit(prim.params["axis"])
+        e1, e2 = tangent_basis(a0)
+
+        def unpack(x):
+            return c0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5], x[6]
+
+        def res(x):
+            c, a, R, r = unpack(x)
+            h, rho, _ = radial(P, c, a)
+            return np.hypot(rho - R, h) - r
+
+        x0 = np.r_[0, 0, 0, 0, 0, prim.params["major_radius"], prim.params["minor_radius"]]
+        try:
+            sol = least_squares(res, x0, method="lm", max_nfev=100)
+        except Exception:
+            return None
+        c, a, R, r = unpack(sol.x)
+        return Primitive("torus", {"center": c, "axis": a, "major_radius": float(abs(R)),
+                                   "minor_radius": float(abs(r))})
+
+    def to_world(self, prim, T):
+        return {"center": T.inv_points(prim.params["center"]).tolist(),
+                "axis": unit(T.inv_dirs(prim.params["axis"])).tolist(),
+                "major_radius": T.inv_length(prim.params["major_radius"]),
+                "minor_radius": T.inv_length(prim.params["minor_radius"])}
+
+    def descriptors(self, prim):
+        return {"major_radius": float(prim.params["major_radius"]),
+                "minor_radius": float(prim.params["minor_radius"])}

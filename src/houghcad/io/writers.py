@@ -1,0 +1,214 @@
+"""Atomic writers for results: JSON, Fit4CAD primitive lists and PLY.
+
+Every writer goes through :func:`atomic_write`, so a file is either written
+whole or not at all: an interrupted or failing run never leaves a truncated
+output behind, and an existing file is only replaced once the new one is
+complete.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import secrets
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+__all__ = ["atomic_write", "write_json", "write_fit4cad_primitives", "write_points_ply"]
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO[Any]]:
+    """Open a temporary file next to ``path``; move it over ``path`` on success.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Final destination.  Its directory must exist.
+    mode : {"w", "wb"}
+        Text (UTF-8) or binary.
+
+    Yields
+    ------
+    file object
+        Write the whole content to it.  On normal exit the data are flushed,
+        fsync'ed and the temporary file is renamed over ``path`` with
+        :func:`os.replace` (atomic on POSIX and Windows); on an exception the
+        temporary file is deleted and ``path`` is left untouched.
+
+    Raises
+    ------
+    OSError
+        The directory is missing or not writable, ``path`` is a directory, ...
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"atomic_write: mode must be 'w' or 'wb', not {mode!r}")
+    dest = Path(path)
+    directory = dest.parent
+    # Same directory => same filesystem => os.replace is a rename, not a copy.
+    tmp = directory / f".{dest.name}.{secrets.token_hex(6)}.tmp"
+    # os.open with 0o666 lets the umask decide the final permissions
+    # (tempfile.mkstemp would force 0o600 on the output).
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+    try:
+        if mode == "w":
+            f: IO[Any] = os.fdopen(fd, "w", encoding="utf-8", newline="\n")
+        else:
+            f = os.fdopen(fd, "wb")
+    except BaseException:
+        os.close(fd)
+        _unlink_quietly(tmp)
+        raise
+    try:
+        with f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, dest)
+    except BaseException:
+        _unlink_quietly(tmp)
+        raise
+    _fsync_directory(directory)
+
+
+def _unlink_quietly(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(path)
+
+
+def _fsync_directory(directory: Path) -> None:
+    """Persist the rename itself (POSIX only; best effort)."""
+    if os.name != "posix":
+        return
+    with contextlib.suppress(OSError):
+        dfd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+
+
+def _json_default(obj: Any) -> Any:
+    """Serialise numpy scalars and arrays that slip into result dictionaries."""
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    raise TypeError(f"Object of type {type(obj).__name__} is not JSON serializable")
+
+
+def write_json(path: str | os.PathLike[str], obj: Any) -> None:
+    """Write ``obj`` as compact JSON (``separators=(",", ":")``), atomically.
+
+    Numpy scalars/arrays are converted.  Non-finite floats are written as
+    ``NaN`` / ``Infinity`` (Python's :mod:`json` reads them back; strict JSON
+    parsers do not), because :class:`houghcad.result.Segment` uses NaN for an
+    unknown MFE.  The text is encoded before the file is opened, so a
+    serialisation error never touches the disk.
+    """
+    text = json.dumps(obj, separators=(",", ":"), default=_json_default)
+    with atomic_write(path, "w") as f:
+        f.write(text)
+        f.write("\n")
+
+
+def write_fit4cad_primitives(path: str | os.PathLike[str], segments: Sequence[np.ndarray]) -> None:
+    """Write segments in the Fit4CAD ground-truth layout, atomically.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination (e.g. ``PC1_primitives.txt``).
+    segments : sequence of int arrays, each shape (M_k,)
+        0-based point indices per segment.  Written 1-based, sorted ascending
+        (as in the benchmark files), one block ``PrimitiveK:=[i j k ...];``
+        per segment, K counting from 1, each block followed by a blank line.
+    """
+    blocks = []
+    for k, seg in enumerate(segments, start=1):
+        idx = np.asarray(seg)
+        if idx.size and (idx.dtype.kind not in "iu" or idx.ndim != 1 or idx.min() < 0):
+            raise ValueError(f"segment {k - 1}: indices must be a 1-D array of non-negative integers")
+        one_based = np.sort(idx.astype(np.int64, copy=False)) + 1
+        blocks.append(f"Primitive{k}:=[{' '.join(map(str, one_based.tolist()))}];\n\n")
+    text = "".join(blocks)
+    with atomic_write(path, "w") as f:
+        f.write(text)
+
+
+def write_points_ply(
+    path: str | os.PathLike[str],
+    points: np.ndarray,
+    fields: Mapping[str, np.ndarray] | None = None,
+    colors: np.ndarray | None = None,
+    binary: bool = True,
+) -> None:
+    """Write points (and per-point attributes) as a PLY ``vertex`` element, atomically.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination ``.ply`` file.
+    points : array_like, shape (N, 3)
+        Written as float64 ``x, y, z``.
+    fields : mapping of name -> array_like, shape (N,), optional
+        Extra scalar properties: integer and boolean arrays become ``int32``,
+        floating arrays ``float32`` (e.g. ``{"segment": labels}``).
+    colors : array_like, shape (N, 3), optional
+        ``uchar red, green, blue``.  Integer arrays are taken as 0-255
+        (clipped); floating arrays as 0-1 (scaled by 255, rounded, clipped).
+    binary : bool
+        Binary little-endian (default) or ascii PLY.
+    """
+    from plyfile import PlyData, PlyElement
+
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), got {pts.shape}")
+    n = pts.shape[0]
+    columns: list[tuple[str, np.ndarray]] = [("x", pts[:, 0]), ("y", pts[:, 1]), ("z", pts[:, 2])]
+    reserved = {"x", "y", "z", "red", "green", "blue"}
+    for name, values in (fields or {}).items():
+        if not name.isidentifier() or name in reserved:
+            raise ValueError(f"invalid or reserved PLY field name {name!r}")
+        arr = np.asarray(values)
+        if arr.shape != (n,):
+            raise ValueError(f"field {name!r} must have shape ({n},), got {arr.shape}")
+        if arr.dtype.kind in "iub":
+            columns.append((name, arr.astype(np.int32)))
+        elif arr.dtype.kind == "f":
+            columns.append((name, arr.astype(np.float32)))
+        else:
+            raise ValueError(f"field {name!r} must be numeric, got dtype {arr.dtype}")
+    if colors is not None:
+        rgb = _colors_to_uint8(colors, n)
+        columns += [("red", rgb[:, 0]), ("green", rgb[:, 1]), ("blue", rgb[:, 2])]
+
+    vertex = np.empty(n, dtype=[(name, arr.dtype.str.replace(">", "<")) for name, arr in columns])
+    for name, arr in columns:
+        vertex[name] = arr
+    ply = PlyData([PlyElement.describe(vertex, "vertex")], text=not binary, byte_order="<")
+    with atomic_write(path, "wb") as f:
+        ply.write(f)
+
+
+def _colors_to_uint8(colors: np.ndarray, n: int) -> np.ndarray:
+    """(n, 3) colours to uint8: ints as 0-255, floats as 0-1."""
+    c = np.asarray(colors)
+    if c.shape != (n, 3):
+        raise ValueError(f"colors must have shape ({n}, 3), got {c.shape}")
+    if c.dtype.kind == "f":
+        c = np.rint(c * 255.0)
+    elif c.dtype.kind not in "iu":
+        raise ValueError(f"colors must be numeric, got dtype {c.dtype}")
+    return np.clip(c, 0, 255).astype(np.uint8)

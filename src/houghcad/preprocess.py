@@ -1,0 +1,233 @@
+"""Point cloud preprocessing (paper §5.1).
+
+Barycentre to the origin, unoriented normals, the most voted normal direction
+to the z-axis, scaling into the unit cube. The similarity is kept so that every
+parameter can be mapped back to the input's coordinates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .hough import direction_accumulator, refine_direction
+
+
+@dataclass(frozen=True)
+class Similarity:
+    """``x_std = scale * R @ (x_world - center)``.
+
+    Attributes
+    ----------
+    center : ndarray, shape (3,)
+        Translation, world units.
+    R : ndarray, shape (3, 3)
+        Rotation (rows are the new axes in world coordinates).
+    scale : float
+        Uniform scale factor (world → standard units).
+    """
+
+    center: np.ndarray
+    R: np.ndarray
+    scale: float
+
+    def points(self, x: np.ndarray) -> np.ndarray:
+        """World points (n, 3) → standard frame."""
+        return self.scale * (np.asarray(x, float) - self.center) @ self.R.T
+
+    def dirs(self, v: np.ndarray) -> np.ndarray:
+        """World directions (n, 3) → standard frame."""
+        return np.asarray(v, float) @ self.R.T
+
+    def inv_points(self, x: np.ndarray) -> np.ndarray:
+        """Standard points (…, 3) → world."""
+        return np.asarray(x, float) @ self.R / self.scale + self.center
+
+    def inv_dirs(self, v: np.ndarray) -> np.ndarray:
+        """Standard directions (…, 3) → world."""
+        return np.asarray(v, float) @ self.R
+
+    def inv_length(self, r: float) -> float:
+        return float(r) / self.scale
+
+
+def rotation_to_z(d: np.ndarray, x_hint: np.ndarray | None = None) -> np.ndarray:
+    """Rotation matrix whose third row is the unit vector ``d``.
+
+    ``x_hint`` (optional) fixes the first row as its component orthogonal to d,
+    so that the frame is deterministic.
+    """
+    d = np.asarray(d, float) / np.linalg.norm(d)
+    cands = [] if x_hint is None else [np.asarray(x_hint, float)]
+    cands += [np.eye(3)[int(np.argmin(np.abs(d)))]]
+    for x in cands:
+        x = x - (x @ d) * d
+        if np.linalg.norm(x) > 1e-6:
+            break
+    x /= np.linalg.norm(x)
+    y = np.cross(d, x)
+    return np.stack([x, y, d])
+
+
+def pca_normals(points: np.ndarray, neighbors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unoriented normals by PCA of each point's neighbourhood.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    neighbors : ndarray of int, shape (n, k)
+        Indices of the k nearest neighbours (the point itself included).
+
+    Returns
+    -------
+    normals : ndarray, shape (n, 3), unit
+    eigvals : ndarray, shape (n, 3)
+        Covariance eigenvalues, ascending (squared length units).
+    """
+    nb = points[neighbors]
+    nb = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", nb, nb) / neighbors.shape[1]
+    w, v = np.linalg.eigh(cov)
+    return v[:, :, 0], w
+
+
+def voting_normals(points: np.ndarray, neighbors: np.ndarray, n_triples: int = 24, angle: float = 10.0,
+                   seed: int = 0, chunk: int = 8192) -> np.ndarray:
+    """Robust unoriented normals by voting (after Raffo et al. 2022).
+
+    Every point draws ``n_triples`` random triples of its neighbours; each
+    triple's plane normal is a vote, and the normal is the mean of the votes
+    that agree (within ``angle`` degrees) with the most supported one. Near
+    sharp edges this picks one side's plane instead of averaging both.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    neighbors : ndarray of int, shape (n, k)
+
+    Returns
+    -------
+    normals : ndarray, shape (n, 3), unit
+    """
+    rng = np.random.default_rng(seed)
+    n, k = neighbors.shape
+    out = np.empty((n, 3))
+    cosa = np.cos(np.radians(angle))
+    for s in range(0, n, chunk):
+        nbr = neighbors[s:s + chunk]
+        m = len(nbr)
+        pick = rng.integers(0, k, size=(m, n_triples, 3))
+        tri = points[np.take_along_axis(nbr[:, None, :], pick.reshape(m, -1)[:, None, :], axis=2)[:, 0]]
+        tri = tri.reshape(m, n_triples, 3, 3)
+        nrm = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
+        ln = np.linalg.norm(nrm, axis=2)
+        ok = ln > 1e-12 * (1 + ln.max(axis=1, keepdims=True))
+        nrm = nrm / np.where(ln > 0, ln, 1)[..., None]
+        agree = (np.abs(np.einsum("mti,msi->mts", nrm, nrm)) >= cosa) & ok[:, None, :] & ok[:, :, None]
+        best = np.argmax(agree.sum(axis=2), axis=1)
+        bvec = nrm[np.arange(m), best]
+        sgn = np.sign(np.einsum("mti,mi->mt", nrm, bvec))
+        sel = agree[np.arange(m), best] * sgn
+        v = np.einsum("mt,mti->mi", sel, nrm)
+        lv = np.linalg.norm(v, axis=1)
+        out[s:s + m] = v / np.where(lv > 0, lv, 1)[:, None]
+    return out
+
+
+@dataclass
+class Preprocessed:
+    """A cloud in standard position, ready for recognition.
+
+    Attributes
+    ----------
+    points : ndarray, shape (n, 3)
+        Points in the standard frame (unit cube, barycentre at the origin,
+        most voted normal along z).
+    normals : ndarray, shape (n, 3)
+        Unit unoriented normals in the standard frame.
+    transform : Similarity
+        World → standard frame.
+    tree : cKDTree
+        KD-tree on ``points``.
+    spacing : float
+        Median nearest-neighbour distance (standard units).
+    noise : float
+        Robust estimate of the noise σ (standard units): median RMS of the
+        local PCA residual.
+    diagonal : float
+        Diagonal of the bounding box (standard units).
+    normals_method : str
+        ``"pca"``, ``"voting"`` or ``"input"``.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    transform: Similarity
+    tree: cKDTree
+    spacing: float
+    noise: float
+    diagonal: float
+    normals_method: str
+
+
+def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: str = "auto",
+               k: int = 16, seed: int = 0) -> Preprocessed:
+    """Put a world cloud in standard position and estimate its normals.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        World coordinates.
+    normals : ndarray, shape (n, 3), optional
+        Given normals (used as they are when ``method`` is ``"auto"`` or ``"input"``).
+    method : {"auto", "pca", "voting", "input"}
+        Normal estimation. ``auto`` uses the given normals if any, else PCA on
+        clean clouds and the voting estimate when the cloud is noisy.
+    k : int
+        Neighbourhood size.
+    seed : int
+        Seed of the voting estimate.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    center = points.mean(axis=0)
+    x = points - center
+    ext = np.ptp(x, axis=0).max()
+    scale0 = 1.0 / ext if ext > 0 else 1.0
+    x = x * scale0
+    tree = cKDTree(x)
+    k = int(min(k, len(x)))
+    _, nbr = tree.query(x, k=k)
+    nrm, ev = pca_normals(x, nbr)
+    noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
+    spacing = float(np.median(tree.query(x, k=2)[0][:, 1]))
+    used = "pca"
+    if normals is not None and method in ("auto", "input"):
+        nrm = np.asarray(normals, float)
+        nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+        used = "input"
+    elif method == "voting" or (method == "auto" and noise > 0.2 * spacing):
+        nrm = voting_normals(x, nbr, seed=seed)
+        used = "voting"
+    elif method not in ("auto", "pca"):
+        raise ValueError(f"unknown normals method {method!r}")
+
+    acc = direction_accumulator()
+    H = acc.smooth(acc.vote(nrm))
+    dirs, _ = acc.peaks(H, min_persistence=0.05, max_peaks=2)
+    d = refine_direction(dirs[0], nrm, np.radians(5.0))
+    hint = None
+    if len(dirs) > 1:
+        hint = refine_direction(dirs[1], nrm, np.radians(5.0))
+    R = rotation_to_z(d, hint)
+    x = x @ R.T
+    nrm = nrm @ R.T
+    ext2 = np.ptp(x, axis=0).max()
+    s2 = 1.0 / ext2 if ext2 > 0 else 1.0
+    x *= s2
+    tree = cKDTree(x)
+    T = Similarity(center=center, R=R, scale=scale0 * s2)
+    diag = float(np.linalg.norm(np.ptp(x, axis=0)))
+    return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
+                        noise=noise * s2, diagonal=diag, normals_method=used)

@@ -1,0 +1,244 @@
+"""The recognition step (paper §5.2).
+
+For each family: standard-form placements, accumulator over the region T,
+votes of the sampled Γ_P, persistent peaks, then candidate evaluation
+(inliers within a threshold with compatible normals, least-squares
+refinement, dense connected subsets X_i, mean fitting error) and selection
+(where candidates compete for the same points, the lowest MFE wins, ties to
+the simpler family).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+from sklearn.cluster import DBSCAN
+
+from .families import Family, Primitive
+from .hough import accumulate, persistent_peaks, smooth
+from .preprocess import Preprocessed
+
+
+@dataclass
+class Context:
+    """Thresholds and data shared by a run (standard-frame units).
+
+    Attributes
+    ----------
+    pre : Preprocessed
+    tau : float
+        Inlier distance for candidate evaluation.
+    epsilon : float
+        Removal distance around accepted primitives (paper: 1–3% of the diagonal).
+    angle : float
+        Normal compatibility tolerance (radians).
+    link : float
+        Neighbour distance that makes a subset connected (dense).
+    min_points : int
+        Smallest segment.
+    persistence : float
+        Peak persistence threshold, fraction of max H.
+    """
+
+    pre: Preprocessed
+    tau: float
+    epsilon: float
+    angle: float
+    link: float
+    min_points: int
+    persistence: float = 0.1
+    max_peaks: int = 24
+    max_directions: int = 12
+    max_radius: float = 2.0
+    min_votes: float = 10.0
+    seed: int = 0
+    local: bool = False
+    neighbors: np.ndarray | None = None
+
+    @property
+    def spacing(self) -> float:
+        return self.pre.spacing
+
+    @property
+    def cos_angle(self) -> float:
+        return float(np.cos(self.angle))
+
+
+@dataclass
+class Candidate:
+    """A primitive with a dense subset X_i of the points it explains.
+
+    ``indices`` index the whole cloud; ``mfe`` follows eq. (1) in the
+    standard frame.
+    """
+
+    family: Family
+    prim: Primitive
+    indices: np.ndarray
+    mfe: float
+    extra: dict = field(default_factory=dict)
+
+
+def mean_fitting_error(dist: np.ndarray, P: np.ndarray) -> float:
+    """Eq. (1): mean distance / diagonal of the axis-aligned bounding box of P (n, 3)."""
+    diag = float(np.linalg.norm(np.ptp(P, axis=0)))
+    return float(dist.mean() / diag) if diag > 0 else float("inf")
+
+
+def dense_subsets(P: np.ndarray, link: float, min_points: int) -> list[np.ndarray]:
+    """Connected dense subsets of P (n, 3): DBSCAN components of at least min_points."""
+    if len(P) < min_points:
+        return []
+    lab = DBSCAN(eps=link, min_samples=3).fit_predict(P)
+    ok = lab >= 0
+    if not ok.any():
+        return []
+    counts = np.bincount(lab[ok])
+    order = np.argsort(lab, kind="stable")
+    lab_sorted = lab[order]
+    out = []
+    for k in np.flatnonzero(counts >= min_points):
+        lo, hi = np.searchsorted(lab_sorted, [k, k + 1])
+        out.append(np.sort(order[lo:hi]))
+    return out
+
+
+def inliers(fam: Family, prim: Primitive, P: np.ndarray, N: np.ndarray, tau: float, cos_angle: float):
+    """Boolean mask of the points within ``tau`` with a compatible normal, and the distances."""
+    d = fam.distance(prim, P)
+    near = d < tau
+    ok = near.copy()
+    if near.any():
+        sn = fam.surface_normals(prim, P[near])
+        ok[near] = np.abs(np.einsum("ij,ij->i", sn, N[near])) >= cos_angle
+    return ok, d
+
+
+def _subsample(n: int, m: int, rng: np.random.Generator) -> np.ndarray:
+    return np.arange(n) if n <= m else np.sort(rng.choice(n, m, replace=False))
+
+
+def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse: float) -> list[Candidate]:
+    """Candidate evaluation on the point set ``idx`` (global indices).
+
+    Inliers within ``coarse`` → least-squares refit → inliers within tau →
+    dense subsets → one Candidate per subset with its MFE.
+    """
+    P, N = ctx.pre.points[idx], ctx.pre.normals[idx]
+    rng = np.random.default_rng(ctx.seed)
+    tol = coarse
+    for _ in range(3):
+        ok, d = inliers(fam, prim, P, N, tol, ctx.cos_angle)
+        if ok.sum() < ctx.min_points:
+            return []
+        sel = np.flatnonzero(ok)
+        sel = sel[_subsample(len(sel), 3000, rng)]
+        new = fam.fit(prim, P[sel], N[sel])
+        if new is None or not fam.valid(new, ctx):
+            return []
+        prim = new
+        tol = ctx.tau
+    ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
+    sel = np.flatnonzero(ok)
+    out = []
+    for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
+        loc = sel[comp]
+        X = P[loc]
+        # A one-row strip is not a surface patch.
+        ev = np.linalg.eigvalsh(np.cov(X.T))
+        if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
+            continue
+        out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X)))
+    return out
+
+
+def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive, float]]:
+    """Peaks of the family's accumulators on the point set ``idx``: coarse
+    primitives with the tolerance their cell size allows."""
+    P, N = ctx.pre.points[idx], ctx.pre.normals[idx]
+    out = []
+    for pl in fam.placements(P, N, ctx):
+        Pl, Nl = pl.local(P, N)
+        grid = fam.region(Pl, Nl, ctx)
+        voter, vals = fam.gamma(Pl, Nl, grid, ctx)
+        if len(voter) == 0:
+            continue
+        H = smooth(accumulate(grid, voter, vals), grid.wrap)
+        pk, _ = persistent_peaks(H, ctx.persistence, grid.wrap, max_peaks=ctx.max_peaks)
+        pk = pk[H.ravel()[pk] >= ctx.min_votes]
+        for v in grid.cell_center(pk):
+            prim = fam.primitive(v, pl)
+            if prim is not None and fam.valid(prim, ctx):
+                out.append((prim, max(2.0 * ctx.tau, 1.5 * float(grid.width[0]))))
+    return out
+
+
+def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candidate]:
+    """Greedy choice among competing candidates.
+
+    Largest first; a candidate competes with the others that share more than
+    half of the smaller one's points, and among them the lowest MFE wins
+    (a more complex family must beat a simpler one clearly).
+    """
+    free = free.copy()
+    order = sorted(range(len(cands)), key=lambda i: (-len(cands[i].indices), cands[i].mfe))
+    done = np.zeros(len(cands), bool)
+    sets = [c.indices for c in cands]
+    accepted = []
+    for i in order:
+        if done[i]:
+            continue
+        group = [i]
+        for j in order:
+            if j == i or done[j]:
+                continue
+            inter = np.intersect1d(sets[i], sets[j], assume_unique=True).size
+            if inter > 0.5 * min(len(sets[i]), len(sets[j])):
+                group.append(j)
+        best = group[0]
+        for j in group[1:]:
+            if _better(cands[j], cands[best]):
+                best = j
+        for j in group:
+            done[j] = True
+        c = cands[best]
+        avail = c.indices[free[c.indices]]
+        if len(avail) < max(ctx.min_points, 0.6 * len(c.indices)):
+            continue
+        c = replace(c, indices=avail)
+        free[avail] = False
+        accepted.append(c)
+    return accepted
+
+
+def _better(a: Candidate, b: Candidate) -> bool:
+    """Whether candidate a should replace b for the same points."""
+    ca, cb = a.family.complexity, b.family.complexity
+    if ca == cb:
+        return (a.mfe, -len(a.indices)) < (b.mfe, -len(b.indices))
+    simple, cplx = (a, b) if ca < cb else (b, a)
+    cplx_wins = cplx.mfe < 0.5 * simple.mfe and simple.mfe - cplx.mfe > 2e-5
+    return (a is cplx) == cplx_wins
+
+
+def recognize(idx: np.ndarray, families: list[Family], ctx: Context, free: np.ndarray) -> list[Candidate]:
+    """One recognition step on the points ``idx`` (global indices).
+
+    Returns the accepted candidates; their points are still marked free in
+    ``free`` (the caller removes them).
+    """
+    idx = idx[free[idx]]
+    if len(idx) < ctx.min_points:
+        return []
+    k = min(10, len(idx))
+    nbr = cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k)[1]
+    ctx = replace(ctx, neighbors=nbr)
+    cands: list[Candidate] = []
+    for fam in families:
+        if not (ctx.local or fam.global_search):
+            continue
+        for prim, coarse in propose(fam, idx, ctx):
+            cands.extend(evaluate(fam, prim, idx, ctx, coarse))
+    return select(cands, free, ctx)

@@ -1,0 +1,75 @@
+"""Plain-text summaries of a :class:`houghcad.result.Result`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .result import Result
+
+__all__ = ["summary_table"]
+
+# Families in the order the paper lists them; unknown types follow alphabetically.
+_FAMILY_ORDER = ("plane", "cylinder", "cone", "sphere", "torus")
+_TOTAL_KEYS = ("total", "total_s", "all")
+
+
+def _fmt_mfe(value: float) -> str:
+    """MFE (dimensionless, typically 1e-4..1e-2) in a fixed 9-character field."""
+    return f"{value:9.2e}" if math.isfinite(value) else f"{'-':>9}"
+
+
+def _mfe_stats(mfe: np.ndarray) -> tuple[float, float]:
+    """(mean, max) of the finite values of a 1-D array; NaN when there are none."""
+    finite = mfe[np.isfinite(mfe)]
+    if finite.size == 0:
+        return math.nan, math.nan
+    return float(finite.mean()), float(finite.max())
+
+
+def _family_rows(result: Result) -> list[tuple[str, int, int, float, float]]:
+    """(type, segments, points, mean MFE, max MFE) per family present, plus a total row."""
+    types = sorted({s.type for s in result.segments},
+                   key=lambda t: (_FAMILY_ORDER.index(t) if t in _FAMILY_ORDER else len(_FAMILY_ORDER), t))
+    rows = []
+    for t in types:
+        segs = [s for s in result.segments if s.type == t]
+        mfe = np.array([s.mfe for s in segs], dtype=np.float64)
+        rows.append((t, len(segs), sum(len(s.indices) for s in segs), *_mfe_stats(mfe)))
+    all_mfe = np.array([s.mfe for s in result.segments], dtype=np.float64)
+    rows.append(("total", len(result.segments), sum(len(s.indices) for s in result.segments),
+                 *_mfe_stats(all_mfe)))
+    return rows
+
+
+def _timing_lines(timing: dict[str, float]) -> list[str]:
+    """``time`` lines: the total (given or summed) then each stage, in seconds."""
+    stages = {k: float(v) for k, v in timing.items() if k not in _TOTAL_KEYS}
+    total = next((float(timing[k]) for k in _TOTAL_KEYS if k in timing), sum(stages.values()))
+    lines = [f"{'time':<12}{total:>10.2f} s"]
+    lines += [f"  {name:<10}{sec:>10.2f} s" for name, sec in stages.items()]
+    return lines
+
+
+def summary_table(result: Result) -> str:
+    """Fixed-width text table summarising ``result``.
+
+    One row per family present (segments, points, mean and max MFE), a total
+    row, the number of unsegmented points (and their share of the cloud) and
+    the wall-clock time, total then per stage.  No trailing newline.
+    """
+    header = f"{'family':<12}{'segments':>9}{'points':>10}{'mean MFE':>11}{'max MFE':>11}"
+    lines = [header, "-" * len(header)]
+    rows = _family_rows(result)
+    for i, (name, n_seg, n_pts, mean_mfe, max_mfe) in enumerate(rows):
+        if i == len(rows) - 1:
+            lines.append("-" * len(header))
+        lines.append(f"{name:<12}{n_seg:>9d}{n_pts:>10d}  {_fmt_mfe(mean_mfe)}  {_fmt_mfe(max_mfe)}")
+    n_unseg = len(result.unsegmented)
+    share = 100.0 * n_unseg / result.n_points if result.n_points else 0.0
+    lines.append(f"{'unsegmented':<12}{'':>9}{n_unseg:>10d}  ({share:.1f}% of {result.n_points} points)")
+    if result.timing:
+        lines.append("")
+        lines += _timing_lines(result.timing)
+    return "\n".join(lines)

@@ -1,0 +1,139 @@
+"""Splitting phase (paper §5.3) and the growth of accepted segments.
+
+What the recognition step leaves is clustered with DBSCAN; every cluster is
+put in each family's standard form and recognised again. A cluster where
+nothing is recognised is over-segmented with CGAL's Efficient RANSAC, and each
+RANSAC piece goes through the Hough recognition: RANSAC only proposes regions,
+the vote decides type and parameters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+from sklearn.cluster import DBSCAN
+
+from .families import Family
+from .recognize import Candidate, Context, recognize
+
+
+def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.ndarray]:
+    """DBSCAN clusters (global indices) of the points ``idx``, largest first."""
+    if len(idx) < ctx.min_points:
+        return []
+    lab = DBSCAN(eps=ctx.link, min_samples=min_samples).fit_predict(ctx.pre.points[idx])
+    out = [idx[lab == k] for k in range(lab.max() + 1)]
+    out = [c for c in out if len(c) >= ctx.min_points]
+    return sorted(out, key=lambda c: (-len(c), int(c[0])))
+
+
+def ransac_pieces(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
+    """Over-segment a cluster with CGAL's Efficient RANSAC (Schnabel et al. 2007).
+
+    Returns the pieces (global indices) RANSAC assigns to a shape. The
+    bindings have no vectorised normal setter, hence the per-point loop at the
+    boundary; clusters are small.
+    """
+    try:
+        from CGAL.CGAL_Kernel import Vector_3
+        from CGAL.CGAL_Point_set_3 import Point_set_3
+        from CGAL.CGAL_Shape_detection import efficient_RANSAC
+    except ImportError:  # pragma: no cover - cgal is a declared dependency
+        return []
+    P, N = ctx.pre.points[idx], ctx.pre.normals[idx]
+    ps = Point_set_3()
+    ps.add_normal_map()
+    ps.insert_range(np.ascontiguousarray(P, dtype=np.float64).ravel())
+    nm = ps.normal_map()
+    for i, n in enumerate(N.tolist()):
+        nm.set(i, Vector_3(*n))
+    sm = ps.add_int_map("shape_index")
+    efficient_RANSAC(ps, sm, min_points=max(ctx.min_points, 10), epsilon=max(ctx.tau, 1e-6),
+                     cluster_epsilon=ctx.link, normal_threshold=float(np.cos(ctx.angle)), probability=0.01,
+                     planes=True, cylinders=True, cones=True, spheres=True, tori=True)
+    lab = np.fromiter((sm.get(i) for i in range(len(idx))), dtype=np.int64, count=len(idx))
+    return [idx[lab == k] for k in range(lab.max() + 1) if (lab == k).sum() >= ctx.min_points]
+
+
+def grow(c: Candidate, free: np.ndarray, ctx: Context) -> Candidate:
+    """Add the free points within ε of the primitive that touch the segment
+    (paper: points closer than ε to a recognised primitive are removed)."""
+    cand = np.flatnonzero(free)
+    if len(cand) == 0:
+        return c
+    P = ctx.pre.points
+    d = c.family.distance(c.prim, P[cand])
+    cand = cand[d < ctx.epsilon]
+    if len(cand) == 0:
+        return c
+    sn = c.family.surface_normals(c.prim, P[cand])
+    cand = cand[np.abs(np.einsum("ij,ij->i", sn, ctx.pre.normals[cand])) >= np.cos(np.radians(60))]
+    if len(cand) == 0:
+        return c
+    dist, _ = cKDTree(P[c.indices]).query(P[cand], distance_upper_bound=ctx.link)
+    add = cand[np.isfinite(dist)]
+    if len(add) == 0:
+        return c
+    free[add] = False
+    return replace(c, indices=np.union1d(c.indices, add))
+
+
+def accept(found: list[Candidate], free: np.ndarray, ctx: Context, segments: list[Candidate]) -> None:
+    """Remove the points of accepted candidates from ``free``, then grow them."""
+    for c in found:
+        free[c.indices] = False
+    for c in found:
+        segments.append(grow(c, free, ctx))
+
+
+def splitting_phase(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate],
+                    max_rounds: int = 6, progress=None) -> None:
+    """Iterate DBSCAN clustering + recognition on what is left, in place."""
+    lctx = replace(ctx, local=True)
+    for _ in range(max_rounds):
+        rest = np.flatnonzero(free)
+        found_any = False
+        for cl in clusters(rest, ctx):
+            cl = cl[free[cl]]
+            if len(cl) < ctx.min_points:
+                continue
+            found = recognize(cl, families, lctx, free)
+            if not found:
+                for piece in ransac_pieces(cl, ctx):
+                    got = recognize(piece, families, lctx, free)
+                    for c in got:  # hide from the next pieces; accept() below takes them
+                        free[c.indices] = False
+                    found += got
+                for c in found:
+                    free[c.indices] = True
+            accept(found, free, ctx, segments)
+            found_any |= bool(found)
+            if progress is not None:
+                progress(len(cl))
+        if not found_any:
+            break
+
+
+def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
+    """Give each leftover point to the segment of its nearest assigned
+    neighbour when it lies within ε of that segment's primitive."""
+    rest = np.flatnonzero(free)
+    if len(rest) == 0 or not segments:
+        return
+    owner = np.full(len(free), -1, dtype=np.int64)
+    for k, s in enumerate(segments):
+        owner[s.indices] = k
+    assigned = np.flatnonzero(owner >= 0)
+    P = ctx.pre.points
+    dist, j = cKDTree(P[assigned]).query(P[rest], distance_upper_bound=2 * ctx.link)
+    ok = np.isfinite(dist)
+    rest, seg = rest[ok], owner[assigned[j[ok]]]
+    for k in np.unique(seg):
+        pts = rest[seg == k]
+        s = segments[k]
+        pts = pts[s.family.distance(s.prim, P[pts]) < ctx.epsilon]
+        if len(pts):
+            free[pts] = False
+            segments[k] = replace(s, indices=np.union1d(s.indices, pts))
