@@ -385,10 +385,9 @@ def ground_truth_for(path: str | Path) -> Path:
     if name.endswith("_primitives.txt"):
         cand = p
     else:
-        stem = name[: -len(".txt")] if name.endswith(".txt") else name
+        stem = name.removesuffix(".txt")
         for suffix in ("_implicit", "_parametric"):
-            if stem.endswith(suffix):
-                stem = stem[: -len(suffix)]
+            stem = stem.removesuffix(suffix)
         cand = p.with_name(stem + "_primitives.txt")
     if not cand.is_file():
         raise InputError(f"{path}: ground truth {cand.name} not found")
@@ -429,6 +428,8 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path) 
     except (TypeError, ValueError) as exc:
         raise InputError(f"{rpath}: invalid result ({exc})") from None
 
+    if result.n_points < 0:
+        raise InputError(f"{rpath}: n_points is negative ({result.n_points})")
     gt_file = ground_truth_for(ground_truth_path)
     gt = read_fit4cad_segments(gt_file)
     n = result.n_points

@@ -346,15 +346,19 @@ class DirectionAccumulator:
         pk, pers = _persistence_graph(H.astype(np.float64), self.indptr, self.indices)
         keep = pers > min_persistence * top
         pk, pers = pk[keep], pers[keep]
-        d = self.cells[pk]
-        # Antipodal twins: keep the canonical half.
-        canon = (d[:, 2] > 1e-12) | ((np.abs(d[:, 2]) <= 1e-12) & (d[:, 0] > 0))
-        pk, pers = pk[canon], pers[canon]
         order = np.lexsort((pk, -pers))
         pk, pers = pk[order], pers[order]
-        if max_peaks is not None:
-            pk, pers = pk[:max_peaks], pers[:max_peaks]
-        return self.cells[pk], pers
+        # Every direction votes twice (n and -n): keep one peak per antipodal pair.
+        kept: list[int] = []
+        for j, c in enumerate(pk):
+            d = self.cells[c]
+            if all(abs(d @ self.cells[pk[m]]) < np.cos(np.radians(8.0)) for m in kept):
+                kept.append(j)
+            if max_peaks is not None and len(kept) >= max_peaks:
+                break
+        dirs = self.cells[pk[kept]]
+        dirs = dirs * np.where(dirs[:, 2:3] < 0, -1.0, 1.0)
+        return dirs, pers[kept]
 
 
 _DIRACC: dict[int, DirectionAccumulator] = {}

@@ -126,7 +126,7 @@ class Segmenter:
         angle = np.radians(min(45.0, 20.0 + 30.0 * pre.noise / max(s, 1e-12)))
         mp = self.min_points if self.min_points is not None else max(8, n // 5000)
         return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle), link=2.0 * s + 2.0 * pre.noise,
-                       min_points=int(mp), persistence=float(self.persistence), min_votes=float(mp),
+                       min_points=int(mp), max_radius=1.0, persistence=float(self.persistence), min_votes=float(mp),
                        seed=int(self.seed))
 
     def _output(self, segments: list[Candidate], pre, points: np.ndarray) -> list[Segment]:

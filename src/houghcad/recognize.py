@@ -129,12 +129,12 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
     P, N = ctx.pre.points[idx], ctx.pre.normals[idx]
     rng = np.random.default_rng(ctx.seed)
     tol = coarse
-    for _ in range(3):
+    for _ in range(2):
         ok, d = inliers(fam, prim, P, N, tol, ctx.cos_angle)
         if ok.sum() < ctx.min_points:
             return []
         sel = np.flatnonzero(ok)
-        sel = sel[_subsample(len(sel), 3000, rng)]
+        sel = sel[_subsample(len(sel), 600, rng)]
         new = fam.fit(prim, P[sel], N[sel])
         if new is None or not fam.valid(new, ctx):
             return []
@@ -150,7 +150,7 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
         ev = np.linalg.eigvalsh(np.cov(X.T))
         if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
             continue
-        out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X)))
+        out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X), {"d": d[loc]}))
     return out
 
 
@@ -175,13 +175,41 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
     return out
 
 
+def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
+    """Point-wise competition: a point stays with a candidate only if no other
+    candidate explains it clearly better (by more than a quarter of tau).
+    Candidates are then cut again into dense subsets."""
+    if len(cands) < 2:
+        return cands
+    pts = np.concatenate([c.indices for c in cands])
+    d = np.concatenate([c.extra["d"] for c in cands])
+    dmin = np.full(len(ctx.pre.points), np.inf)
+    np.minimum.at(dmin, pts, d)
+    keep = d <= dmin[pts] + 0.25 * ctx.tau
+    out = []
+    start = 0
+    for c in cands:
+        k = keep[start:start + len(c.indices)]
+        start += len(c.indices)
+        if k.all():
+            out.append(c)
+            continue
+        idx, dd = c.indices[k], c.extra["d"][k]
+        for comp in dense_subsets(ctx.pre.points[idx], ctx.link, ctx.min_points):
+            out.append(Candidate(c.family, c.prim, idx[comp],
+                                 mean_fitting_error(dd[comp], ctx.pre.points[idx[comp]]), {"d": dd[comp]}))
+    return out
+
+
 def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candidate]:
     """Greedy choice among competing candidates.
 
-    Largest first; a candidate competes with the others that share more than
-    half of the smaller one's points, and among them the lowest MFE wins
-    (a more complex family must beat a simpler one clearly).
+    After the point-wise competition, largest first; a candidate competes with
+    the others that share more than half of the smaller one's points, and
+    among them the lowest MFE wins (a more complex family must beat a simpler
+    one clearly).
     """
+    cands = compete(cands, ctx)
     free = free.copy()
     order = sorted(range(len(cands)), key=lambda i: (-len(cands[i].indices), cands[i].mfe))
     done = np.zeros(len(cands), bool)

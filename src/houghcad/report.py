@@ -47,8 +47,9 @@ def _timing_lines(timing: dict[str, float]) -> list[str]:
     """``time`` lines: the total (given or summed) then each stage, in seconds."""
     stages = {k: float(v) for k, v in timing.items() if k not in _TOTAL_KEYS}
     total = next((float(timing[k]) for k in _TOTAL_KEYS if k in timing), sum(stages.values()))
-    lines = [f"{'time':<12}{total:>10.2f} s"]
-    lines += [f"  {name:<10}{sec:>10.2f} s" for name, sec in stages.items()]
+    width = max([10] + [len(name) for name in stages])  # keep the seconds column aligned
+    lines = [f"{'time':<{width + 2}}{total:>10.2f} s"]
+    lines += [f"  {name:<{width}}{sec:>10.2f} s" for name, sec in stages.items()]
     return lines
 
 

@@ -69,7 +69,7 @@ def grow(c: Candidate, free: np.ndarray, ctx: Context) -> Candidate:
     if len(cand) == 0:
         return c
     sn = c.family.surface_normals(c.prim, P[cand])
-    cand = cand[np.abs(np.einsum("ij,ij->i", sn, ctx.pre.normals[cand])) >= np.cos(np.radians(60))]
+    cand = cand[np.abs(np.einsum("ij,ij->i", sn, ctx.pre.normals[cand])) >= ctx.cos_angle]
     if len(cand) == 0:
         return c
     dist, _ = cKDTree(P[c.indices]).query(P[cand], distance_upper_bound=ctx.link)

@@ -537,13 +537,18 @@ def _finish(
     outliers: float,
     pose: bool,
     scale: float | None,
+    extent: float,
 ) -> SynthCloud:
-    """Pose (all of points, normals, params), then noise, then outliers, then shuffle."""
+    """Pose (all of points, normals, params), then noise, then outliers, then shuffle.
+
+    ``extent`` (units) sizes the random translation; it must not depend on ``missing``/``noise``
+    so that those options leave the pose unchanged.
+    """
     if noise < 0:
         raise ValueError(f"noise must be ≥ 0, got {noise!r}")
     _check_fraction("outliers", outliers)
     if pose or scale is not None:
-        R, t, s = random_pose(st.pose, scale, extent=_bbox_diag(pts))
+        R, t, s = random_pose(st.pose, scale, extent=extent)
         if not pose:
             R, t = np.eye(3), np.zeros(3)
         pts, nrm = apply_transform(pts, nrm, R, t, s)
@@ -620,6 +625,7 @@ def single(
     spec = SAMPLERS[family]
     shape = spec.random_shape(st.shape)
     pts, nrm = spec.sample(st.sample, int(n_points), **shape)
+    extent = _bbox_diag(pts)
     if missing > 0:
         d = st.shape.standard_normal(3)
         d /= np.linalg.norm(d)
@@ -628,7 +634,7 @@ def single(
         pts, nrm = pts[keep], nrm[keep]
     prims = [{"type": family, "params": spec.local_params(**shape), "name": family}]
     labels = np.zeros(len(pts), np.int64)
-    return _finish(st, pts, nrm, labels, prims, f"{family}-{seed}", noise, outliers, pose, scale)
+    return _finish(st, pts, nrm, labels, prims, f"{family}-{seed}", noise, outliers, pose, scale, extent)
 
 
 # --------------------------------------------------------------------------------------------
@@ -742,7 +748,7 @@ def _part(
     for f in faces:
         params = transform_params(f.family, SAMPLERS[f.family].local_params(**f.shape), f.R, f.t)
         prims.append({"type": f.family, "params": params, "name": f.name})
-    return _finish(st, pts, nrm, lab, prims, name, noise, outliers, pose, scale)
+    return _finish(st, pts, nrm, lab, prims, name, noise, outliers, pose, scale, _bbox_diag(pts))
 
 
 def block_with_hole_and_slot(
@@ -1066,6 +1072,7 @@ def _atomic_write(path: Path, write: Callable[[Any], None], mode: str) -> None:
     try:
         with os.fdopen(fd, mode) as fh:
             write(fh)
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -209,3 +209,35 @@ def axis_from_normal_lines(P: np.ndarray, Nrm: np.ndarray) -> tuple[np.ndarray, 
     cb0 = cb - pitch * c
     point = np.cross(c, cb0) + m
     return point, c, pitch, float(max(w[0], 0.0))
+
+
+def gauss_newton(fun, x0: np.ndarray, iters: int = 8, tol: float = 1e-12) -> np.ndarray | None:
+    """Damped Gauss–Newton on ``fun(x) -> (residuals (n,), jacobian (n, k))``.
+
+    Hand-written because the families' analytic Jacobians make a few
+    iterations cost microseconds, where a generic solver's overhead dominates.
+    """
+    x = np.asarray(x0, float)
+    r, J = fun(x)
+    cost = r @ r
+    lam = 1e-6
+    for _ in range(iters):
+        A = J.T @ J
+        g = J.T @ r
+        try:
+            step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-15), -g)
+        except np.linalg.LinAlgError:
+            return None
+        xn = x + step
+        rn, Jn = fun(xn)
+        cn = rn @ rn
+        if not np.isfinite(cn):
+            return None
+        if cn <= cost:
+            x, r, J, cost = xn, rn, Jn, cn
+            lam = max(lam / 10, 1e-12)
+            if np.abs(step).max() < tol:
+                break
+        else:
+            lam *= 10
+    return x

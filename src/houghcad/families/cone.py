@@ -102,7 +102,7 @@ class Cone(Family):
             return rho * np.cos(al) - h * np.sin(al)
 
         try:
-            sol = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], method="lm", max_nfev=80)
+            sol = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], method="lm", max_nfev=40)
         except Exception:
             return None
         p, a, al = unpack(sol.x)

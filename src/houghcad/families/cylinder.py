@@ -4,11 +4,10 @@ is along z through the origin."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..hough import Grid, accumulate, direction_accumulator, persistent_peaks, refine_direction, smooth
 from ..preprocess import rotation_to_z
-from .base import Family, Placement, Primitive, radial, register, tangent_basis, unit
+from .base import Family, Placement, Primitive, gauss_newton, radial, register, tangent_basis, unit
 
 
 def axis_candidates(P, N, ctx, max_dirs):
@@ -111,25 +110,29 @@ class Cylinder(Family):
         return 0 < prim.params["radius"] < ctx.max_radius
 
     def fit(self, prim, P, N):
-        p0, a0, r0 = prim.params["axis_point"], unit(prim.params["axis"]), prim.params["radius"]
+        a0 = unit(prim.params["axis"])
+        p0 = prim.params["axis_point"]
         e1, e2 = tangent_basis(a0)
 
-        def unpack(x):
+        def fun(x):
             a = unit(a0 + x[0] * e1 + x[1] * e2)
-            return p0 + x[2] * e1 + x[3] * e2, a, x[4]
+            c = p0 + x[2] * e1 + x[3] * e2
+            v = P - c
+            h = v @ a
+            w = v - h[:, None] * a
+            rho = np.linalg.norm(w, axis=1)
+            u = w / np.maximum(rho, 1e-15)[:, None]
+            J = np.stack([-h * (u @ e1), -h * (u @ e2), -(u @ e1), -(u @ e2), -np.ones(len(P))], axis=1)
+            return rho - x[4], J
 
-        def res(x):
-            p, a, r = unpack(x)
-            return radial(P, p, a)[1] - r
-
-        try:
-            sol = least_squares(res, np.array([0, 0, 0, 0, r0]), method="lm", max_nfev=60)
-        except Exception:
+        x = gauss_newton(fun, np.array([0, 0, 0, 0, prim.params["radius"]]))
+        if x is None:
             return None
-        p, a, r = unpack(sol.x)
+        a = unit(a0 + x[0] * e1 + x[1] * e2)
+        p = p0 + x[2] * e1 + x[3] * e2
         # Keep the axis point as the foot of the points' centroid (a stable choice).
         h = (P.mean(axis=0) - p) @ a
-        return Primitive("cylinder", {"axis_point": p + h * a, "axis": a, "radius": float(abs(r))})
+        return Primitive("cylinder", {"axis_point": p + h * a, "axis": a, "radius": float(abs(x[4]))})
 
     def to_world(self, prim, T):
         return {"axis_point": T.inv_points(prim.params["axis_point"]).tolist(),

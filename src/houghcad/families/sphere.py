@@ -4,10 +4,9 @@ at the origin."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..hough import Grid, accumulate, persistent_peaks, smooth
-from .base import Family, Placement, Primitive, lines_intersection, register, unit
+from .base import Family, Placement, Primitive, gauss_newton, lines_intersection, register, unit
 
 
 def center_votes(P, N, ctx, max_centers):
@@ -70,16 +69,16 @@ class Sphere(Family):
         return 0 < prim.params["radius"] < ctx.max_radius
 
     def fit(self, prim, P, N):
-        c0, r0 = prim.params["center"], prim.params["radius"]
+        def fun(x):
+            v = P - x[:3]
+            r = np.linalg.norm(v, axis=1)
+            J = np.hstack([-v / np.maximum(r, 1e-15)[:, None], -np.ones((len(P), 1))])
+            return r - x[3], J
 
-        def res(x):
-            return np.linalg.norm(P - x[:3], axis=1) - x[3]
-
-        try:
-            sol = least_squares(res, np.r_[c0, r0], method="lm", max_nfev=60)
-        except Exception:
+        x = gauss_newton(fun, np.r_[prim.params["center"], prim.params["radius"]])
+        if x is None:
             return None
-        return Primitive("sphere", {"center": sol.x[:3], "radius": float(abs(sol.x[3]))})
+        return Primitive("sphere", {"center": x[:3], "radius": float(abs(x[3]))})
 
     def to_world(self, prim, T):
         return {"center": T.inv_points(prim.params["center"]).tolist(),

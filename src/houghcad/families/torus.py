@@ -86,7 +86,7 @@ class Torus(Family):
 
         x0 = np.r_[0, 0, 0, 0, 0, prim.params["major_radius"], prim.params["minor_radius"]]
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=100)
+            sol = least_squares(res, x0, method="lm", max_nfev=50)
         except Exception:
             return None
         c, a, R, r = unpack(sol.x)

@@ -1,0 +1,415 @@
+"""The ``houghcad`` command line: errors, outputs, and (with the real pipeline) the happy path."""
+
+from __future__ import annotations
+
+import importlib.resources
+import json
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from houghcad import __version__
+from houghcad.cli import main
+from houghcad.result import Result, Segment
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _write_xyz(path: Path, pts: np.ndarray) -> Path:
+    np.savetxt(path, pts, fmt="%.9f")
+    return path
+
+
+def _blob(n: int = 200, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-1.0, 1.0, size=(n, 3))
+
+
+def _parts_cloud(seed: int = 0) -> np.ndarray:
+    """~3000 points: two perpendicular 10x10 planes and a radius-2 cylinder standing on one."""
+    rng = np.random.default_rng(seed)
+    n = 1000
+    floor = np.column_stack([rng.uniform(0, 10, n), rng.uniform(0, 10, n), np.zeros(n)])
+    wall = np.column_stack([np.zeros(n), rng.uniform(0, 10, n), rng.uniform(0, 10, n)])
+    theta = rng.uniform(0, 2 * np.pi, n)
+    cyl = np.column_stack([6 + 2 * np.cos(theta), 6 + 2 * np.sin(theta), rng.uniform(0.5, 6, n)])
+    return np.vstack([floor, wall, cyl])
+
+
+def _assert_one_line_error(capsys, *words: str) -> str:
+    out, err = capsys.readouterr()
+    assert out == ""
+    lines = err.strip("\n").split("\n")
+    assert len(lines) == 1, err
+    assert lines[0].startswith("houghcad: error: "), err
+    assert "Traceback" not in err
+    for w in words:
+        assert w in lines[0], err
+    return lines[0]
+
+
+def _fake_result(n_points: int, source: str | None = None) -> Result:
+    segs = [
+        Segment(0, "plane", np.arange(0, n_points // 2, dtype=np.int64),
+                {"normal": [0.0, 0.0, 1.0], "offset": 0.0, "point": [0.0, 0.0, 0.0]}, 1e-3),
+        Segment(1, "cylinder", np.arange(n_points // 2, n_points - 5, dtype=np.int64),
+                {"axis_point": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "radius": 2.0}, 2e-3),
+    ]
+    return Result(n_points=n_points, segments=segs, unsegmented=np.arange(n_points - 5, n_points, dtype=np.int64),
+                  timing={"preprocess": 0.1, "hough": 0.5, "total": 0.7}, options={}, source=source)
+
+
+@pytest.fixture
+def fake_pipeline(monkeypatch):
+    """Replace ``houghcad.pipeline`` by a stub that records its calls.
+
+    ``stub.behaviour`` may be set to an exception instance (raised by segment)
+    or a callable (n_points -> Result).
+    """
+    stub = types.ModuleType("houghcad.pipeline")
+    stub.calls = []
+    stub.behaviour = None
+
+    def segment(points, normals=None, **kwargs):
+        stub.calls.append({"points": points, "normals": normals, **kwargs})
+        if isinstance(stub.behaviour, BaseException):
+            raise stub.behaviour
+        if callable(stub.behaviour):
+            return stub.behaviour(len(points))
+        return _fake_result(len(points), kwargs.get("source"))
+
+    stub.segment = segment
+    monkeypatch.setitem(sys.modules, "houghcad.pipeline", stub)
+    return stub
+
+
+# --------------------------------------------------------------------------- basics
+
+
+def test_version(capsys):
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"houghcad {__version__}"
+
+
+def test_help_exits_zero(capsys):
+    assert main(["segment", "--help"]) == 0
+    assert "--fit4cad" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv,word", [
+    ([], "required"),
+    (["frobnicate"], "invalid choice"),
+    (["segment"], "INPUT"),
+    (["segment", "x.xyz", "--epsilon", "abc"], "--epsilon"),
+    (["segment", "x.xyz", "--epsilon", "-0.1"], "--epsilon"),
+    (["segment", "x.xyz", "--epsilon", "nan"], "--epsilon"),
+    (["segment", "x.xyz", "--seed", "-1"], "--seed"),
+    (["segment", "x.xyz", "--normals", "magic"], "--normals"),
+    (["segment", "x.xyz", "--bogus"], "--bogus"),
+    (["evaluate", "only_one.json"], "GROUND_TRUTH"),
+])
+def test_usage_errors(capsys, argv, word):
+    assert main(argv) == 2
+    _assert_one_line_error(capsys, word)
+
+
+# --------------------------------------------------------------------------- bad input files
+
+
+def _bad_inputs(tmp_path: Path) -> dict[str, tuple[Path, str]]:
+    """name -> (file, word expected in the message)."""
+    cases: dict[str, tuple[Path, str]] = {}
+    p = tmp_path / "empty.xyz"
+    p.write_text("")
+    cases["empty"] = (p, "empty")
+    p = tmp_path / "words.xyz"
+    p.write_text("1 2 3\n4 five 6\n" * 20)
+    cases["non-numeric"] = (p, "non-numeric")
+    pts = _blob()
+    pts[5, 0] = np.nan
+    cases["nan"] = (_write_xyz(tmp_path / "nan.xyz", pts), "NaN")
+    pts[5, 0] = np.inf
+    cases["inf"] = (_write_xyz(tmp_path / "inf.xyz", pts), "infinite")
+    cases["ten"] = (_write_xyz(tmp_path / "ten.xyz", _blob(10)), "only 10 points")
+    flat = _blob()
+    flat[:, 2] = 1.5
+    cases["coplanar"] = (_write_xyz(tmp_path / "flat.xyz", flat), "coplanar")
+    t = np.linspace(0, 1, 50)[:, None]
+    cases["collinear"] = (_write_xyz(tmp_path / "line.xyz", t * [1.0, 2.0, 3.0]), "collinear")
+    cases["missing"] = (tmp_path / "missing.ply", "file not found")
+    p = tmp_path / "garbage.foo"
+    p.write_bytes(b"\x89garbage \x00\x01 not a cloud")
+    cases["unknown"] = (p, "unrecognised file format")
+    return cases
+
+
+@pytest.mark.parametrize("case", ["empty", "non-numeric", "nan", "inf", "ten", "coplanar", "collinear",
+                                  "missing", "unknown"])
+def test_segment_bad_input(tmp_path, capsys, monkeypatch, fake_pipeline, case):
+    path, word = _bad_inputs(tmp_path)[case]
+    out = tmp_path / "out" / "result.json"
+    out.parent.mkdir()
+    monkeypatch.chdir(tmp_path)
+    before = sorted(tmp_path.rglob("*"))
+    assert main(["segment", str(path), "-o", str(out), "--fit4cad", str(tmp_path / "f4c")]) == 2
+    _assert_one_line_error(capsys, str(path), word)
+    assert sorted(tmp_path.rglob("*")) == before  # no partial output, no directory created
+    assert fake_pipeline.calls == []
+
+
+def test_segment_bad_input_subprocess(tmp_path):
+    bad = tmp_path / "bad.xyz"
+    bad.write_text("1 2 3\nx y z w\n")
+    proc = subprocess.run([sys.executable, "-m", "houghcad", "segment", "bad.xyz"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip("\n").split("\n")
+    assert len(lines) == 1 and lines[0].startswith("houghcad: error: bad.xyz: "), proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.xyz"]
+
+
+def test_subprocess_missing_file_and_usage(tmp_path):
+    for argv, word in ((["segment", "nope.ply"], "nope.ply: file not found"), (["segment"], "INPUT")):
+        proc = subprocess.run([sys.executable, "-m", "houghcad", *argv],
+                              cwd=tmp_path, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 2
+        assert "Traceback" not in proc.stderr
+        assert proc.stderr.count("\n") == 1 and word in proc.stderr
+
+
+# --------------------------------------------------------------------------- output paths (stub pipeline)
+
+
+def test_output_directory_missing(tmp_path, capsys, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    out = tmp_path / "no" / "such" / "r.json"
+    assert main(["segment", str(inp), "-o", str(out)]) == 2
+    _assert_one_line_error(capsys, str(out), "does not exist")
+    assert fake_pipeline.calls == []  # failed before the (long) run
+
+
+def test_output_is_a_directory(tmp_path, capsys, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    assert main(["segment", str(inp), "-o", str(tmp_path)]) == 2
+    _assert_one_line_error(capsys, "is a directory")
+
+
+def test_output_would_overwrite_input(tmp_path, capsys, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    before = inp.read_bytes()
+    assert main(["segment", str(inp), "-o", str(inp)]) == 2
+    _assert_one_line_error(capsys, "overwrite the input")
+    assert inp.read_bytes() == before
+
+
+def test_oserror_while_writing_becomes_one_line(tmp_path, capsys, monkeypatch, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    out = tmp_path / "r.json"
+
+    def deny(path, obj):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr("houghcad.cli.write_json", deny)
+    assert main(["segment", str(inp), "-o", str(out)]) == 2
+    _assert_one_line_error(capsys, str(out), "Permission denied")
+    assert not out.exists()
+
+
+def test_failing_run_leaves_no_output(tmp_path, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    out = tmp_path / "r.json"
+    fake_pipeline.behaviour = RuntimeError("pipeline bug")
+    with pytest.raises(RuntimeError, match="pipeline bug"):  # real bugs keep their traceback
+        main(["segment", str(inp), "-o", str(out), "--fit4cad", str(tmp_path / "f4c")])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["part.xyz"]
+
+
+def test_failing_serialisation_leaves_no_partial_file(tmp_path, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    out = tmp_path / "r.json"
+
+    def unserialisable(n):
+        res = _fake_result(n)
+        res.options = {"callback": object()}  # json cannot encode this
+        return res
+
+    fake_pipeline.behaviour = unserialisable
+    with pytest.raises(TypeError):
+        main(["segment", str(inp), "-o", str(out)])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["part.xyz"]
+
+
+def test_bad_families_from_pipeline_is_exit_2(tmp_path, capsys, fake_pipeline):
+    from houghcad.errors import InputError
+
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    fake_pipeline.behaviour = InputError("unknown primitive family 'blob'")
+    assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "--families", "plane,blob"]) == 2
+    _assert_one_line_error(capsys, "blob")
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_keyboard_interrupt_is_quiet_130(tmp_path, capsys, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    fake_pipeline.behaviour = KeyboardInterrupt()
+    assert main(["segment", str(inp), "-o", str(tmp_path / "r.json")]) == 130
+    assert capsys.readouterr().err == ""
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_segment_with_stub_writes_outputs(tmp_path, capsys, monkeypatch, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob(100))
+    monkeypatch.chdir(tmp_path)
+    argv = ["segment", "part.xyz", "--families", "plane,cylinder", "--epsilon", "0.02", "--seed", "3",
+            "--normals", "pca", "--fit4cad", "f4c/nested"]
+    assert main(argv) == 0
+    (call,) = fake_pipeline.calls
+    assert call["families"] == "plane,cylinder" and call["epsilon"] == 0.02
+    assert call["seed"] == 3 and call["normals_method"] == "pca" and call["source"] == "part.xyz"
+    assert call["points"].shape == (100, 3) and call["normals"] is None
+
+    data = json.loads((tmp_path / "part_segments.json").read_text())  # default -o
+    assert data["n_points"] == 100 and [s["type"] for s in data["segments"]] == ["plane", "cylinder"]
+    prim = (tmp_path / "f4c" / "nested" / "part_primitives.txt").read_text()
+    assert prim.startswith("Primitive1:=[1 2 3 ") and "\n\nPrimitive2:=[51 52 " in prim
+    assert prim.endswith("95];\n\n")
+
+    out = capsys.readouterr().out
+    assert "plane" in out and "cylinder" in out and "unsegmented" in out and "wrote" in out
+    assert inp.read_bytes() == _write_xyz(tmp_path / "again.xyz", _blob(100)).read_bytes()
+
+
+def test_quiet_prints_nothing(tmp_path, capsys, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "--quiet"]) == 0
+    assert capsys.readouterr() == ("", "")
+    assert (tmp_path / "r.json").is_file()
+
+
+# --------------------------------------------------------------------------- demo (stub pipeline)
+
+
+def test_demo_missing_data_file(tmp_path, capsys, monkeypatch, fake_pipeline):
+    monkeypatch.setattr(importlib.resources, "files", lambda pkg: tmp_path / "pkg")
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo"]) == 2
+    _assert_one_line_error(capsys, "demo_part.ply", "missing")
+    assert not (tmp_path / "houghcad-demo").exists()
+
+
+def test_demo_with_stub(tmp_path, capsys, monkeypatch, fake_pipeline):
+    data = tmp_path / "pkg" / "data"
+    data.mkdir(parents=True)
+    from houghcad.io import write_points_ply
+
+    write_points_ply(data / "demo_part.ply", _blob(300))
+    monkeypatch.setattr(importlib.resources, "files", lambda pkg: tmp_path / "pkg")
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo"]) == 0
+    result = json.loads((tmp_path / "houghcad-demo" / "demo_part_segments.json").read_text())
+    assert result["n_points"] == 300
+    assert "plane" in capsys.readouterr().out
+    assert main(["demo", "-o", str(tmp_path / "elsewhere"), "--quiet"]) == 0
+    assert capsys.readouterr() == ("", "")
+    assert (tmp_path / "elsewhere" / "demo_part_segments.json").is_file()
+
+
+# --------------------------------------------------------------------------- evaluate
+
+
+def _eval_files(tmp_path: Path) -> tuple[Path, Path]:
+    res = _fake_result(100)
+    rpath = tmp_path / "PC_segments.json"
+    rpath.write_text(json.dumps(res.to_dict()))
+    gt = tmp_path / "PC_primitives.txt"
+    gt.write_text("Primitive1:=[" + " ".join(str(i) for i in range(1, 51)) + "];\n\n"
+                  "Primitive2:=[" + " ".join(str(i) for i in range(51, 101)) + "];\n\n")
+    return rpath, gt
+
+
+def test_evaluate_text_and_json(tmp_path, capsys):
+    rpath, gt = _eval_files(tmp_path)
+    assert main(["evaluate", str(rpath), str(gt)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("DSC")
+    assert any(line.startswith("MFE") for line in out)
+    assert main(["evaluate", str(rpath), str(gt), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert list(report["measures"])[0] == "DSC"
+    assert report["measures"]["DSC"] == pytest.approx(1.0 - (5 / 2) / 100, abs=0.05)
+    assert report["n_gt"] == 2 and report["n_pred"] == 2
+    assert set(report["mfe"]) == {"min", "mean", "max"}
+
+
+def test_evaluate_missing_files(tmp_path, capsys):
+    rpath, gt = _eval_files(tmp_path)
+    assert main(["evaluate", str(tmp_path / "nope.json"), str(gt)]) == 2
+    _assert_one_line_error(capsys, "nope.json")
+    assert main(["evaluate", str(rpath), str(tmp_path / "nope_primitives.txt")]) == 2
+    _assert_one_line_error(capsys, "nope_primitives.txt")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    assert main(["evaluate", str(bad), str(gt)]) == 2
+    _assert_one_line_error(capsys, "bad.json")
+
+
+# --------------------------------------------------------------------------- happy path (real pipeline)
+
+
+def test_segment_real_pipeline(tmp_path, capsys):
+    pts = _parts_cloud()
+    inp = _write_xyz(tmp_path / "parts.xyz", pts)
+    before = (inp.read_bytes(), inp.stat().st_mtime_ns)
+    out = tmp_path / "parts.json"
+    assert main(["segment", str(inp), "-o", str(out), "--fit4cad", str(tmp_path / "f4c")]) == 0
+    assert (inp.read_bytes(), inp.stat().st_mtime_ns) == before
+
+    data = json.loads(out.read_text())
+    assert data["n_points"] == len(pts)
+    assert isinstance(data["segments"], list) and data["segments"]
+    for seg in data["segments"]:
+        assert {"type", "indices", "params", "mfe"} <= set(seg)
+        assert seg["type"] in {"plane", "cylinder", "cone", "sphere", "torus"}
+        idx = np.asarray(seg["indices"])
+        assert idx.size and idx.min() >= 0 and idx.max() < len(pts)
+        assert isinstance(seg["params"], dict)
+    assert "plane" in {s["type"] for s in data["segments"]}
+    assert isinstance(data["unsegmented"], list)
+    assert isinstance(data["timing"], dict)
+
+    prim = (tmp_path / "f4c" / "parts_primitives.txt").read_text()
+    assert prim.count("Primitive") == len(data["segments"])
+    table = capsys.readouterr().out
+    assert "plane" in table and "unsegmented" in table
+
+
+def test_demo_real(tmp_path, capsys):
+    assert main(["demo", "-o", str(tmp_path / "demo"), "--quiet"]) == 0
+    assert capsys.readouterr() == ("", "")
+    data = json.loads((tmp_path / "demo" / "demo_part_segments.json").read_text())
+    assert data["n_points"] > 0 and data["segments"]
+
+
+# --------------------------------------------------------------------------- report
+
+
+def test_summary_table_layout():
+    from houghcad.report import summary_table
+
+    res = _fake_result(100)
+    res.segments.append(Segment(2, "plane", np.arange(95, 97, dtype=np.int64), {}, float("nan")))
+    lines = summary_table(res).splitlines()
+    assert lines[0].split() == ["family", "segments", "points", "mean", "MFE", "max", "MFE"]
+    rows = {line.split()[0]: line.split() for line in lines[2:] if line and not line.startswith(("-", " "))}
+    assert rows["plane"][1:3] == ["2", "52"] and rows["plane"][3] == "1.00e-03"  # NaN MFE ignored
+    assert rows["cylinder"][1:3] == ["1", "45"]
+    assert rows["total"][1:3] == ["3", "97"]
+    assert rows["unsegmented"][1] == "5"
+    assert rows["time"][1] == "0.70"  # the pipeline's own total wins over the sum of stages
+    assert list(rows).index("plane") < list(rows).index("cylinder")
+    assert len({len(line) for line in lines[:2]}) == 1
