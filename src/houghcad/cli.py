@@ -86,11 +86,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--families", default="simple", metavar="LIST",
                    help="'simple', 'all' or comma-separated names, e.g. plane,cylinder (default: simple)")
     p.add_argument("--epsilon", type=_fraction, default=None, metavar="F",
-                   help="distance tolerance as a fraction of the bounding-box diagonal "
-                   "(default: per-family values)")
+                   help="distance tolerance as a fraction of the bounding-box diagonal, below 0.5 "
+                   "(default: from the point spacing and the estimated noise)")
     p.add_argument("--seed", type=_seed, default=0, metavar="N", help="random seed (default: 0)")
     p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
-                   help="normal estimation when the file has none (default: auto)")
+                   help="normals: 'auto' uses the file's normals if any, else PCA (voting on noisy "
+                   "clouds); 'pca' and 'voting' always estimate them (default: auto)")
     p.add_argument("--fit4cad", metavar="DIR",
                    help="also write DIR/<input stem>_primitives.txt in the Fit4CAD ground-truth format")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
@@ -107,7 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Print the Fit4CAD classification measures (DSC first) and MFE statistics.")
     p.add_argument("result", metavar="RESULT.json", help="file written by 'houghcad segment'")
     p.add_argument("ground_truth", metavar="GROUND_TRUTH",
-                   help="PCn_primitives.txt (or the cloud PCn.txt next to it)")
+                   help="NAME_primitives.txt, or the cloud file NAME.txt/.ply/... next to it")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=_cmd_evaluate)
     return parser

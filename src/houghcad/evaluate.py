@@ -374,18 +374,28 @@ def mfe_stats(result: Result) -> dict[str, float]:
 # --------------------------------------------------------------------------- files
 
 
-def ground_truth_for(path: str | Path) -> Path:
-    """Locate the ``_primitives.txt`` ground truth for a Fit4CAD cloud.
+#: Point-cloud file extensions :func:`ground_truth_for` strips (those of ``houghcad.io.readers``).
+_CLOUD_EXTENSIONS = (".ply", ".xyz", ".txt", ".csv", ".pts", ".asc", ".npy", ".obj", ".off", ".stl")
 
-    Accepts ``PCn_primitives.txt`` itself, the cloud ``PCn.txt``, a sibling ``PCn_implicit.txt`` /
-    ``PCn_parametric.txt``, or the prefix ``.../PCn``.
+
+def ground_truth_for(path: str | Path) -> Path:
+    """Locate the ``_primitives.txt`` ground truth for a point cloud.
+
+    Accepts ``NAME_primitives.txt`` itself, the cloud ``NAME.<ext>`` for any point-cloud
+    extension houghcad reads (``.ply .xyz .txt .csv .pts .asc .npy .obj .off .stl``, any case),
+    a sibling ``NAME_implicit.txt`` / ``NAME_parametric.txt``, or the prefix ``.../NAME``; the
+    ground truth is ``NAME_primitives.txt`` in the same folder.
     """
     p = Path(path)
     name = p.name
     if name.endswith("_primitives.txt"):
         cand = p
     else:
-        stem = name.removesuffix(".txt")
+        stem = name
+        for ext in _CLOUD_EXTENSIONS:
+            if stem.lower().endswith(ext) and len(stem) > len(ext):
+                stem = stem[: -len(ext)]
+                break
         for suffix in ("_implicit", "_parametric"):
             stem = stem.removesuffix(suffix)
         cand = p.with_name(stem + "_primitives.txt")

@@ -88,8 +88,13 @@ class Segmenter:
 
         t1 = time.perf_counter()
         report("recognition", 0.1)
-        found = recognize(np.arange(len(points)), fams, ctx, free)
+        # The first round keeps only substantial segments: smaller ones, and the
+        # families voted per cluster, are settled in the splitting phase where
+        # every family competes for the same points.
+        gctx = replace(ctx, min_points=max(ctx.min_points, len(points) // 100))
+        found = recognize(np.arange(len(points)), fams, gctx, free)
         accept(found, free, ctx, segments)
+        absorb(segments, free, ctx)
         timing["recognition"] = time.perf_counter() - t1
 
         t2 = time.perf_counter()
@@ -120,14 +125,17 @@ class Segmenter:
 
     def _context(self, pre, n: int) -> Context:
         s = pre.spacing
-        tau = max(0.5 * s, 3.0 * pre.noise)
+        # Inliers within three noise sigmas: on exact CAD samples this is tight,
+        # so tangent-continuous neighbours (a fillet beside a plane) stay apart.
+        tau = max(0.1 * s, 3.0 * pre.noise)
         eps = 2.0 * tau if self.epsilon is None else float(self.epsilon) * pre.diagonal
         tau = min(tau, eps)
         angle = np.radians(min(45.0, 20.0 + 30.0 * pre.noise / max(s, 1e-12)))
         mp = self.min_points if self.min_points is not None else max(8, n // 5000)
-        return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle), link=2.0 * s + 2.0 * pre.noise,
-                       min_points=int(mp), max_radius=1.0, persistence=float(self.persistence), min_votes=float(mp),
-                       seed=int(self.seed))
+        return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle),
+                       link=max(2.0 * s, 1.5 * pre.reach) + 2.0 * pre.noise, cell=max(tau, 0.5 * s),
+                       min_points=int(mp), max_radius=1.0, persistence=float(self.persistence),
+                       min_votes=float(mp), seed=int(self.seed))
 
     def _output(self, segments: list[Candidate], pre, points: np.ndarray) -> list[Segment]:
         """Refit every segment on its own points and map it to world coordinates."""
@@ -149,7 +157,7 @@ class Segmenter:
 
     @staticmethod
     def _dummy_ctx(pre) -> Context:
-        return Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, min_points=0)
+        return Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0)
 
 
 def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="simple",

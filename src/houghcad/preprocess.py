@@ -160,6 +160,9 @@ class Preprocessed:
         Diagonal of the bounding box (standard units).
     normals_method : str
         ``"pca"``, ``"voting"`` or ``"input"``.
+    reach : float
+        Median distance to the 6th nearest neighbour (standard units): the
+        scale at which the sampling is connected.
     """
 
     points: np.ndarray
@@ -170,6 +173,7 @@ class Preprocessed:
     noise: float
     diagonal: float
     normals_method: str
+    reach: float = 0.0
 
 
 def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: str = "auto",
@@ -198,10 +202,13 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     x = x * scale0
     tree = cKDTree(x)
     k = int(min(k, len(x)))
-    _, nbr = tree.query(x, k=k)
+    dist, nbr = tree.query(x, k=k)
     nrm, ev = pca_normals(x, nbr)
     noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
-    spacing = float(np.median(tree.query(x, k=2)[0][:, 1]))
+    spacing = float(np.median(dist[:, 1]))
+    # Connectivity scale: the 6th neighbour's distance is about 1.5 spacings
+    # on grid-like sampling but 3 on random (Poisson) sampling.
+    reach = float(np.median(dist[:, min(6, k - 1)]))
     used = "pca"
     if normals is not None and method in ("auto", "input"):
         nrm = np.asarray(normals, float)
@@ -230,4 +237,4 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     T = Similarity(center=center, R=R, scale=scale0 * s2)
     diag = float(np.linalg.norm(np.ptp(x, axis=0)))
     return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
-                        noise=noise * s2, diagonal=diag, normals_method=used)
+                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2)

@@ -36,6 +36,8 @@ class Context:
         Normal compatibility tolerance (radians).
     link : float
         Neighbour distance that makes a subset connected (dense).
+    cell : float
+        Accumulator resolution for lengths.
     min_points : int
         Smallest segment.
     persistence : float
@@ -47,6 +49,7 @@ class Context:
     epsilon: float
     angle: float
     link: float
+    cell: float
     min_points: int
     persistence: float = 0.1
     max_peaks: int = 24
@@ -128,8 +131,8 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
     """
     P, N = ctx.pre.points[idx], ctx.pre.normals[idx]
     rng = np.random.default_rng(ctx.seed)
-    tol = coarse
-    for _ in range(2):
+    # Coarse (cell size) → intermediate → tau: each refit sees cleaner inliers.
+    for tol in (coarse, max(ctx.tau, min(coarse, 4 * ctx.tau))):
         ok, d = inliers(fam, prim, P, N, tol, ctx.cos_angle)
         if ok.sum() < ctx.min_points:
             return []
@@ -139,7 +142,6 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
         if new is None or not fam.valid(new, ctx):
             return []
         prim = new
-        tol = ctx.tau
     ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
     sel = np.flatnonzero(ok)
     out = []
@@ -149,6 +151,8 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
         # A one-row strip is not a surface patch.
         ev = np.linalg.eigvalsh(np.cov(X.T))
         if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
+            continue
+        if not ctx.local and not fam.well_determined(prim, X, ctx):
             continue
         out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X), {"d": d[loc]}))
     return out
@@ -171,7 +175,7 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
         for v in grid.cell_center(pk):
             prim = fam.primitive(v, pl)
             if prim is not None and fam.valid(prim, ctx):
-                out.append((prim, max(2.0 * ctx.tau, 1.5 * float(grid.width[0]))))
+                out.append((prim, max(2.0 * ctx.cell, 1.5 * float(grid.width[0]))))
     return out
 
 

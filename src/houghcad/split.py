@@ -100,7 +100,7 @@ def splitting_phase(families: list[Family], ctx: Context, free: np.ndarray, segm
             if len(cl) < ctx.min_points:
                 continue
             found = recognize(cl, families, lctx, free)
-            if not found:
+            if not found and len(cl) >= 3 * ctx.min_points:
                 for piece in ransac_pieces(cl, ctx):
                     got = recognize(piece, families, lctx, free)
                     for c in got:  # hide from the next pieces; accept() below takes them
@@ -110,6 +110,8 @@ def splitting_phase(families: list[Family], ctx: Context, free: np.ndarray, segm
                     free[c.indices] = True
             accept(found, free, ctx, segments)
             found_any |= bool(found)
+            if found:
+                absorb(segments, free, ctx)
             if progress is not None:
                 progress(len(cl))
         if not found_any:

@@ -101,6 +101,11 @@ class Family:
         """Least-squares refinement on inliers; None when degenerate."""
         return prim
 
+    def well_determined(self, prim: Primitive, P: np.ndarray, ctx) -> bool:
+        """Whether a segment (points P) pins the primitive down well enough to
+        be accepted in the global round, before other families compete."""
+        return True
+
     def valid(self, prim: Primitive, ctx) -> bool:
         """Reject degenerate shapes (radii beyond the model's size...)."""
         return True

@@ -51,7 +51,7 @@ class Cone(Family):
         z = Pl[:, 2]
         ext = float(np.ptp(Pl, axis=0).max())
         lo, hi = min(z.min(), 0.0) - ext, max(z.min(), 0.0) + 0.25 * ext
-        nb = int(np.clip((hi - lo) / max(ctx.tau, 1e-6), 16, 256))
+        nb = int(np.clip((hi - lo) / max(ctx.cell, 1e-6), 16, 256))
         return Grid((lo, np.radians(1.0)), (hi, np.radians(89.0)), (nb, 176))
 
     def gamma(self, Pl, Nl, grid, ctx):

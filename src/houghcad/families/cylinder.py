@@ -41,7 +41,7 @@ def circle_centers(Q, M, ctx, max_centers):
     ext = float((hi - lo).max())
     if ext <= 0:
         return np.zeros((0, 2))
-    nb = int(np.clip(ext / max(2 * ctx.tau, ctx.spacing), 16, 160))
+    nb = int(np.clip(ext / max(2 * ctx.cell, ctx.spacing), 16, 160))
     cw = ext / nb
     smax = 0.5 * ext * 1.05
     s = np.arange(cw, smax, cw)
@@ -86,7 +86,7 @@ class Cylinder(Family):
     def region(self, Pl, Nl, ctx):
         rho = np.hypot(Pl[:, 0], Pl[:, 1])
         hi = min(float(rho.max()) + ctx.tau, ctx.max_radius)
-        w = max(ctx.tau, 1e-6)
+        w = max(ctx.cell, 1e-6)
         return Grid((0.0,), (hi,), (int(np.clip(np.ceil(hi / w), 1, 4096)),))
 
     def gamma(self, Pl, Nl, grid, ctx):
@@ -108,6 +108,17 @@ class Cylinder(Family):
 
     def valid(self, prim, ctx):
         return 0 < prim.params["radius"] < ctx.max_radius
+
+    def well_determined(self, prim, P, ctx):
+        # A short band of a partial cylinder is also a slice of a torus, a
+        # cone or a sphere: leave it to the per-cluster rounds.
+        h, _, rad = radial(P, prim.params["axis_point"], prim.params["axis"])
+        if np.ptp(h) >= 4 * ctx.link:
+            return True
+        e1, e2 = tangent_basis(prim.params["axis"])
+        ang = np.arctan2(rad @ e2, rad @ e1)
+        covered = np.unique(np.floor((ang + np.pi) / (2 * np.pi) * 36).astype(int)).size
+        return covered >= 27
 
     def fit(self, prim, P, N):
         a0 = unit(prim.params["axis"])

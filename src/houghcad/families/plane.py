@@ -32,7 +32,7 @@ class Plane(Family):
     def region(self, Pl, Nl, ctx):
         z = Pl[:, 2]
         lo, hi = z.min() - ctx.tau, z.max() + ctx.tau
-        w = max(ctx.tau, 1e-6)
+        w = max(ctx.cell, 1e-6)
         nb = int(np.clip(np.ceil((hi - lo) / w), 1, 4096))
         return Grid((lo,), (hi,), (nb,))
 

@@ -17,7 +17,7 @@ def center_votes(P, N, ctx, max_centers):
         return np.zeros((0, 3))
     c = 0.5 * (lo + hi)
     half = 0.5 * ext * 1.5
-    nb = int(np.clip(ext / max(2 * ctx.tau, ctx.spacing), 12, 56))
+    nb = int(np.clip(ext / max(2 * ctx.cell, ctx.spacing), 12, 56))
     cw = 2 * half / nb
     s = np.arange(cw, half, cw)
     s = np.concatenate([-s, s])
@@ -36,6 +36,7 @@ class Sphere(Family):
     param_names = ("center", "radius")
     n_unknowns = 1
     complexity = 2
+    global_search = False
 
     def placements(self, P, N, ctx):
         cents = list(center_votes(P, N, ctx, ctx.max_peaks))
@@ -48,7 +49,7 @@ class Sphere(Family):
     def region(self, Pl, Nl, ctx):
         r = np.linalg.norm(Pl, axis=1)
         hi = min(float(r.max()) + ctx.tau, ctx.max_radius)
-        return Grid((0.0,), (hi,), (int(np.clip(np.ceil(hi / max(ctx.tau, 1e-6)), 1, 4096)),))
+        return Grid((0.0,), (hi,), (int(np.clip(np.ceil(hi / max(ctx.cell, 1e-6)), 1, 4096)),))
 
     def gamma(self, Pl, Nl, grid, ctx):
         r = np.linalg.norm(Pl, axis=1)

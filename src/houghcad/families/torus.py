@@ -45,7 +45,7 @@ class Torus(Family):
     def region(self, Pl, Nl, ctx):
         rho = np.hypot(Pl[:, 0], Pl[:, 1])
         hi = min(float(rho.max()) + ctx.tau, ctx.max_radius)
-        nb = int(np.clip(hi / max(ctx.tau, 1e-6), 16, 200))
+        nb = int(np.clip(hi / max(ctx.cell, 1e-6), 16, 200))
         return Grid((0.0, 0.0), (hi, hi), (nb, nb))
 
     def gamma(self, Pl, Nl, grid, ctx):
