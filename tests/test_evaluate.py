@@ -218,6 +218,24 @@ def test_ground_truth_for_accepts_cloud_prefix_and_gt(tmp_path: Path):
         ground_truth_for(tmp_path / "PC8.txt")
 
 
+@pytest.mark.parametrize("ext", [".ply", ".xyz", ".txt", ".csv", ".pts", ".asc", ".npy", ".obj", ".off",
+                                 ".stl", ".PLY"])
+def test_ground_truth_for_strips_any_cloud_extension(tmp_path: Path, ext: str):
+    # Regression: demo_part.ply used to look for demo_part.ply_primitives.txt.
+    gt = tmp_path / "demo_part_primitives.txt"
+    gt.write_text("Primitive1:=[1];")
+    assert ground_truth_for(tmp_path / f"demo_part{ext}") == gt
+    with pytest.raises(InputError, match=r"other_primitives\.txt not found"):
+        ground_truth_for(tmp_path / f"other{ext}")
+
+
+def test_ground_truth_for_bundled_demo_part():
+    from importlib.resources import as_file, files
+
+    with as_file(files("houghcad") / "data" / "demo_part.ply") as cloud:
+        assert ground_truth_for(cloud) == cloud.with_name("demo_part_primitives.txt")
+
+
 def _result_json(tmp_path: Path, segments: list[np.ndarray], n: int) -> Path:
     segs = [Segment(i, "plane", np.sort(s), {}, 0.01 * (i + 1)) for i, s in enumerate(segments)]
     p = tmp_path / "result.json"

@@ -1,0 +1,261 @@
+"""Tests of houghcad.families: geometry, least-squares fits and the world mapping of every family.
+
+The geometry functions are frame-agnostic, so primitives are built directly from synth's world
+parameters.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from houghcad import synth
+from houghcad.families import REGISTRY, SIMPLE, Primitive, select
+from houghcad.errors import InputError
+from houghcad.preprocess import Similarity
+
+FAMILIES = list(SIMPLE)
+SEEDS = [0, 1, 2]
+
+
+def _prim(type_: str, params: dict) -> Primitive:
+    """A Primitive from synth-style parameters (lists → arrays)."""
+    return Primitive(type_, {k: (np.asarray(v, float) if isinstance(v, (list, tuple, np.ndarray)) else float(v))
+                             for k, v in params.items()})
+
+
+def _unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def _angle_deg(a, b, oriented=False) -> float:
+    c = float(_unit(a) @ _unit(b))
+    c = c if oriented else abs(c)
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def _line_distance(p, d, q) -> float:
+    """Distance of point q to the line p + t d."""
+    w = np.asarray(q, float) - np.asarray(p, float)
+    d = _unit(d)
+    return float(np.linalg.norm(w - (w @ d) * d))
+
+
+def _tilt(a, deg, rng):
+    """Unit vector at ``deg`` degrees from a, in a random direction."""
+    a = _unit(a)
+    e = rng.normal(size=3)
+    e = _unit(e - (e @ a) * a)
+    t = np.radians(deg)
+    return np.cos(t) * a + np.sin(t) * e
+
+
+def test_registry_holds_the_simple_families():
+    assert set(FAMILIES) <= set(REGISTRY)
+    for name in FAMILIES:
+        fam = REGISTRY[name]
+        assert fam.name == name
+        assert fam.param_names
+    assert [f.name for f in select("plane, cylinder")] == ["plane", "cylinder"]
+    assert [f.name for f in select(["sphere", "sphere"])] == ["sphere"]
+    with pytest.raises(InputError):
+        select("plane,blob")
+
+
+# ---------------------------------------------------------------------------- geometry
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("family", FAMILIES)
+def test_distance_is_zero_on_the_surface(family, seed):
+    cloud = synth.single(family, seed, n_points=2000)
+    prim = _prim(family, cloud.primitives[0]["params"])
+    d = REGISTRY[family].distance(prim, cloud.points)
+    assert d.shape == (len(cloud.points),)
+    assert d.max() <= 1e-9 * cloud.diagonal()
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("family", FAMILIES)
+def test_distance_is_euclidean_off_the_surface(family, seed):
+    """Points moved along the true normal by δ (small against the curvature radius) are at δ."""
+    cloud = synth.single(family, seed, n_points=2000)
+    prim = _prim(family, cloud.primitives[0]["params"])
+    rng = np.random.default_rng(seed)
+    delta = 0.01 * cloud.diagonal() * rng.uniform(-1, 1, len(cloud.points))
+    moved = cloud.points + delta[:, None] * cloud.normals
+    d = REGISTRY[family].distance(prim, moved)
+    np.testing.assert_allclose(d, np.abs(delta), atol=1e-9 * cloud.diagonal())
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("family", FAMILIES)
+def test_surface_normals_match_synth_up_to_sign(family, seed):
+    cloud = synth.single(family, seed, n_points=2000)
+    prim = _prim(family, cloud.primitives[0]["params"])
+    sn = REGISTRY[family].surface_normals(prim, cloud.points)
+    assert sn.shape == cloud.points.shape
+    np.testing.assert_allclose(np.linalg.norm(sn, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", sn, cloud.normals)), 1.0, atol=1e-9)
+
+
+# ---------------------------------------------------------------------------- fit
+
+
+def _perturb(family: str, params: dict, diag: float, rng) -> Primitive:
+    """A start a few degrees and a few percent of the diagonal away from the truth."""
+    p = _prim(family, params).copy().params
+    shift = lambda: 0.02 * diag * _unit(rng.normal(size=3))  # noqa: E731
+    if family == "plane":
+        p["normal"] = _tilt(p["normal"], 3.0, rng)
+        p["offset"] = float(p["offset"] + 0.02 * diag)
+    elif family == "cylinder":
+        p["axis"] = _tilt(p["axis"], 3.0, rng)
+        p["axis_point"] = p["axis_point"] + shift()
+        p["radius"] *= 1.05
+    elif family == "cone":
+        p["axis"] = _tilt(p["axis"], 3.0, rng)
+        p["apex"] = p["apex"] + shift()
+        p["half_angle"] += np.radians(2.0)
+    elif family == "sphere":
+        p["center"] = p["center"] + shift()
+        p["radius"] *= 1.05
+    elif family == "torus":
+        p["axis"] = _tilt(p["axis"], 3.0, rng)
+        p["center"] = p["center"] + shift()
+        p["major_radius"] *= 1.05
+        p["minor_radius"] *= 0.95
+    return Primitive(family, p)
+
+
+def _param_errors(family: str, gt: dict, pr: dict, diag: float) -> dict[str, float]:
+    """Errors in degrees (angles) and fractions of the diagonal (lengths, positions)."""
+    gt = _prim(family, gt).params
+    if family == "plane":
+        # Offset measured at the object (the true patch centre's distance to the fitted plane): the raw
+        # offset difference would multiply a tiny normal error by the random translation.
+        return {"normal": _angle_deg(gt["normal"], pr["normal"]),
+                "offset": abs(float(_unit(pr["normal"]) @ gt["point"]) - pr["offset"]) / diag}
+    if family == "cylinder":
+        return {"axis": _angle_deg(gt["axis"], pr["axis"]), "radius": abs(pr["radius"] - gt["radius"]) / diag,
+                "axis_line": _line_distance(pr["axis_point"], pr["axis"], gt["axis_point"]) / diag}
+    if family == "cone":
+        return {"axis": _angle_deg(gt["axis"], pr["axis"], oriented=True),
+                "half_angle": abs(np.degrees(pr["half_angle"] - gt["half_angle"])),
+                "apex": float(np.linalg.norm(pr["apex"] - gt["apex"])) / diag}
+    if family == "sphere":
+        return {"center": float(np.linalg.norm(pr["center"] - gt["center"])) / diag,
+                "radius": abs(pr["radius"] - gt["radius"]) / diag}
+    return {"axis": _angle_deg(gt["axis"], pr["axis"]), "center": float(np.linalg.norm(pr["center"] - gt["center"])) / diag,
+            "major": abs(pr["major_radius"] - gt["major_radius"]) / diag,
+            "minor": abs(pr["minor_radius"] - gt["minor_radius"]) / diag}
+
+
+# Angles in degrees, everything else as a fraction of the diagonal.
+FIT_TOL = {"normal": 0.5, "axis": 0.5, "half_angle": 0.5,
+           "offset": 0.002, "radius": 0.002, "axis_line": 0.002, "apex": 0.005, "center": 0.002,
+           "major": 0.002, "minor": 0.002}
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("family", FAMILIES)
+def test_fit_recovers_parameters_from_a_perturbed_start(family, seed):
+    cloud = synth.single(family, seed, n_points=3000, noise=0.002)
+    diag = cloud.diagonal()
+    rng = np.random.default_rng(100 + seed)
+    gt = cloud.primitives[0]["params"]
+    start = _perturb(family, gt, diag, rng)
+    before = _param_errors(family, gt, start.params, diag)
+    fam = REGISTRY[family]
+    sel = rng.choice(len(cloud.points), 600, replace=False)  # as the pipeline does
+    fitted = fam.fit(start, cloud.points[sel], cloud.normals[sel])
+    assert fitted is not None and fitted.family == family
+    err = _param_errors(family, gt, fitted.params, diag)
+    for k, v in err.items():
+        assert v <= FIT_TOL[k], (k, v, "start:", before[k])
+    # The refit is a better surface for the points than the start.
+    d_fit = fam.distance(fitted, cloud.points).mean()
+    d_start = fam.distance(start, cloud.points).mean()
+    assert d_fit < d_start
+    assert d_fit <= 1.5 * cloud.sigma  # mean |N(0, σ²)| along the normal is 0.8 σ
+
+
+# ---------------------------------------------------------------------------- to_world
+
+
+def _to_standard(family: str, params: dict, T: Similarity) -> Primitive:
+    """World parameters → the same primitive in the frame x_std = T.points(x)."""
+    p = _prim(family, params).params
+    out: dict = {}
+    for k, v in p.items():
+        kind = synth.PARAM_KINDS[k]
+        if kind == "point":
+            out[k] = T.points(v[None])[0]
+        elif kind == "direction":
+            out[k] = T.dirs(v[None])[0]
+        elif kind == "length":
+            out[k] = T.scale * v
+        elif kind == "invariant":
+            out[k] = v
+    if family == "plane":
+        out["offset"] = float(out["normal"] @ out["point"])
+    return Primitive(family, out)
+
+
+def _random_similarity(rng) -> Similarity:
+    return Similarity(center=rng.uniform(-3, 3, 3), R=synth.random_rotation(rng), scale=float(rng.uniform(0.2, 5.0)))
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("family", FAMILIES)
+def test_to_world_inverts_a_similarity(family, seed):
+    cloud = synth.single(family, seed, n_points=1000)
+    gt = cloud.primitives[0]["params"]
+    T = _random_similarity(np.random.default_rng(seed))
+    fam = REGISTRY[family]
+    std = _to_standard(family, gt, T)
+    # The standard-frame primitive is the same surface as seen through T ...
+    d_std = fam.distance(std, T.points(cloud.points))
+    assert d_std.max() <= 1e-9 * T.scale * cloud.diagonal()
+    # ... and to_world brings its parameters back.
+    world = fam.to_world(std, T)
+    assert set(world) == set(fam.param_names)
+    for k in fam.param_names:
+        if k == "offset":
+            assert world[k] == pytest.approx(gt[k], abs=1e-9 * cloud.diagonal())
+        elif isinstance(gt[k], list):
+            np.testing.assert_allclose(world[k], gt[k], atol=1e-9 * max(1.0, cloud.diagonal()))
+            assert isinstance(world[k], list)  # JSON-ready
+        else:
+            assert world[k] == pytest.approx(gt[k], rel=1e-9)
+    errs = _param_errors(family, gt, _prim(family, world).params, cloud.diagonal())
+    assert max(errs.values()) < 1e-6
+
+
+def test_plane_to_world_without_a_point_uses_the_offset():
+    rng = np.random.default_rng(7)
+    T = _random_similarity(rng)
+    n = _unit(rng.normal(size=3))
+    k = 0.3
+    world = REGISTRY["plane"].to_world(Primitive("plane", {"normal": n, "offset": k}), T)
+    # x_std on the plane n·x = k ⇔ x_world = T.inv_points(x_std) on n_w·x = offset_w.
+    x_std = k * n + 0.5 * np.cross(n, _unit(rng.normal(size=3)))
+    x_w = T.inv_points(x_std[None])[0]
+    assert np.asarray(world["normal"]) @ x_w == pytest.approx(world["offset"])
+    np.testing.assert_allclose(world["normal"], T.inv_dirs(n[None])[0])
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_descriptors_are_position_independent(family):
+    cloud = synth.single(family, 0, n_points=500)
+    gt = cloud.primitives[0]["params"]
+    fam = REGISTRY[family]
+    rng = np.random.default_rng(1)
+    T1 = Similarity(center=rng.uniform(-3, 3, 3), R=synth.random_rotation(rng), scale=1.0)
+    T2 = Similarity(center=rng.uniform(-3, 3, 3), R=synth.random_rotation(rng), scale=1.0)
+    d1 = fam.descriptors(_to_standard(family, gt, T1))
+    d2 = fam.descriptors(_to_standard(family, gt, T2))
+    assert d1.keys() == d2.keys()
+    for k in d1:
+        assert d1[k] == pytest.approx(d2[k])

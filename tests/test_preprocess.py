@@ -1,0 +1,227 @@
+"""Tests of houghcad.preprocess: the similarity, standard position, normal estimation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from houghcad import synth
+from houghcad.preprocess import Similarity, pca_normals, preprocess, rotation_to_z, voting_normals
+
+
+def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise angles (n,) between unoriented unit directions a, b (n, 3), degrees."""
+    c = np.abs(np.einsum("ij,ij->i", a, b))
+    return np.degrees(np.arccos(np.clip(c, 0.0, 1.0)))
+
+
+def _normal_errors(cloud: synth.SynthCloud, pre) -> np.ndarray:
+    """Angle (deg) between estimated normals and the true ones, in the standard frame."""
+    return _angles_deg(pre.normals, pre.transform.dirs(cloud.normals))
+
+
+# ---------------------------------------------------------------------------- Similarity
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_similarity_round_trip(seed):
+    rng = np.random.default_rng(seed)
+    T = Similarity(center=rng.uniform(-5, 5, 3), R=synth.random_rotation(rng), scale=float(rng.uniform(0.1, 10)))
+    x = rng.normal(size=(50, 3)) * 3
+    v = rng.normal(size=(50, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    np.testing.assert_allclose(T.inv_points(T.points(x)), x, atol=1e-12)
+    np.testing.assert_allclose(T.points(T.inv_points(x)), x, atol=1e-10)
+    np.testing.assert_allclose(T.inv_dirs(T.dirs(v)), v, atol=1e-12)
+    # Directions keep their length, lengths scale by `scale`, the centre goes to the origin.
+    np.testing.assert_allclose(np.linalg.norm(T.dirs(v), axis=1), 1.0)
+    d_world = np.linalg.norm(x[1:] - x[:-1], axis=1)
+    d_std = np.linalg.norm(T.points(x)[1:] - T.points(x)[:-1], axis=1)
+    np.testing.assert_allclose(d_std, T.scale * d_world)
+    for L in d_world[:5]:
+        assert T.inv_length(T.scale * L) == pytest.approx(L)
+    np.testing.assert_allclose(T.points(T.center[None]), 0.0, atol=1e-12)
+    # A point moved along a direction stays consistent: T(x + t v) = T(x) + t s T.dirs(v).
+    np.testing.assert_allclose(T.points(x + 0.7 * v), T.points(x) + 0.7 * T.scale * T.dirs(v), atol=1e-10)
+
+
+def test_rotation_to_z_is_a_rotation_with_d_as_third_row():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        d = rng.normal(size=3)
+        R = rotation_to_z(d, x_hint=rng.normal(size=3))
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+        np.testing.assert_allclose(R[2], d / np.linalg.norm(d))
+    # Along a coordinate axis too (the default x hint is then degenerate or not).
+    for d in np.eye(3):
+        R = rotation_to_z(d)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(R[2], d)
+
+
+# ---------------------------------------------------------------------------- standard position
+
+
+@pytest.mark.parametrize("part,seed,noise", [
+    ("block_with_hole_and_slot", 0, 0.0),
+    ("block_with_hole_and_slot", 1, 0.002),
+    ("filleted_block", 2, 0.0),
+    ("plate_with_holes", 0, 0.002),
+])
+def test_most_voted_normal_direction_goes_to_z(part, seed, noise):
+    cloud = synth.PARTS[part](seed=seed, n_points=5000, noise=noise)  # random pose
+    pre = preprocess(cloud.points)
+    sizes = [len(s) for s in cloud.segments()]
+    big = cloud.primitives[int(np.argmax(sizes))]
+    assert big["type"] == "plane"
+    n_std = pre.transform.dirs(np.asarray(big["params"]["normal"])[None])[0]
+    assert np.degrees(np.arccos(min(1.0, abs(n_std[2])))) <= 2.0
+    # Before preprocessing the pose is random: the test is not trivially true.
+    n_world = np.asarray(big["params"]["normal"])
+    assert abs(n_world[2]) < np.cos(np.radians(2.0))
+
+
+@pytest.mark.parametrize("family,seed", [("cylinder", 0), ("torus", 1), ("plane", 2)])
+def test_points_in_unit_cube_centred_at_the_barycentre(family, seed):
+    cloud = synth.single(family, seed, n_points=3000, noise=0.002)
+    pre = preprocess(cloud.points)
+    assert pre.points.shape == cloud.points.shape
+    np.testing.assert_allclose(pre.points.mean(axis=0), 0.0, atol=1e-12)
+    assert np.ptp(pre.points, axis=0).max() == pytest.approx(1.0)
+    assert np.abs(pre.points).max() <= 1.0
+    # The kept transform maps the input onto the standard points, and back.
+    np.testing.assert_allclose(pre.transform.points(cloud.points), pre.points, atol=1e-12)
+    np.testing.assert_allclose(pre.transform.inv_points(pre.points), cloud.points,
+                               atol=1e-9 * np.abs(cloud.points).max())
+    np.testing.assert_allclose(np.linalg.norm(pre.normals, axis=1), 1.0)
+    assert pre.diagonal == pytest.approx(float(np.linalg.norm(np.ptp(pre.points, axis=0))))
+    d, _ = pre.tree.query(pre.points[:10])
+    np.testing.assert_allclose(d, 0.0)
+
+
+# ---------------------------------------------------------------------------- normals
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_pca_normals_on_a_clean_plane_are_exact(seed):
+    cloud = synth.single("plane", seed, n_points=4000)
+    pre = preprocess(cloud.points, method="pca")
+    assert pre.normals_method == "pca"
+    assert _normal_errors(cloud, pre).max() <= 1e-4
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_pca_normals_on_a_clean_cylinder_within_one_degree(seed):
+    cloud = synth.single("cylinder", seed, n_points=4000)
+    pre = preprocess(cloud.points, method="pca")
+    err = _normal_errors(cloud, pre)
+    # Random sampling makes k-NN neighbourhoods lopsided, which tilts PCA normals on curved
+    # surfaces by a fraction of (neighbourhood radius / radius): typical error < 1°, a tail of 2–3°.
+    assert np.median(err) <= 1.0
+    assert err.mean() <= 1.0
+    assert np.percentile(err, 99) <= 4.0
+
+
+def test_pca_normals_function_returns_sorted_eigenvalues():
+    rng = np.random.default_rng(0)
+    P, N = synth.sample_plane_patch(rng, 500, (1.0, 1.0))
+    R = synth.random_rotation(rng)
+    P, N = synth.apply_transform(P, N, R, np.zeros(3))
+    _, nbr = cKDTree(P).query(P, k=12)
+    nrm, ev = pca_normals(P, nbr)
+    assert np.all(np.diff(ev, axis=1) >= -1e-15)
+    assert np.abs(ev[:, 0]).max() < 1e-12  # flat: no spread along the normal
+    assert _angles_deg(nrm, N).max() < 1e-4
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_voting_normals_on_a_noisy_plane_within_a_few_degrees(seed):
+    cloud = synth.single("plane", seed, n_points=4000, noise=0.001)
+    pre = preprocess(cloud.points, method="voting")
+    assert pre.normals_method == "voting"
+    err = _normal_errors(cloud, pre)
+    assert np.median(err) <= 4.0
+    assert np.percentile(err, 90) <= 8.0
+
+
+@pytest.mark.xfail(strict=False, reason=(
+    "voting normals are worse than PCA on noisy smooth surfaces, and `auto` switches to them exactly "
+    "there: plane noise=0.001, seeds 0-2, median/90th-pct error voting 3.4°/7.4°, 3.4°/7.1°, 3.4°/7.3° "
+    "vs pca 2.0°/3.8°, 2.1°/4.1°, 2.0°/3.8° (noise=0.002: 8.1°/19.0° vs 3.9°/8.0°)"))
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_voting_normals_not_worse_than_pca_on_a_noisy_plane(seed):
+    cloud = synth.single("plane", seed, n_points=4000, noise=0.001)
+    err_v = _normal_errors(cloud, preprocess(cloud.points, method="voting"))
+    err_p = _normal_errors(cloud, preprocess(cloud.points, method="pca"))
+    assert np.median(err_v) <= 1.25 * np.median(err_p)
+
+
+def _roof(seed: int, n: int = 3000, angle_deg: float = 90.0):
+    """Two square plane patches (synth samplers) meeting at a sharp edge along the x-axis."""
+    rng = np.random.default_rng(seed)
+    p1, n1 = synth.sample_plane_patch(rng, n, (1.0, 1.0))
+    p2, n2 = synth.sample_plane_patch(rng, n, (1.0, 1.0))
+    shift = np.array([0.0, 0.5, 0.0])  # both patches: y in [0, 1], the edge is y = z = 0
+    t = np.radians(angle_deg)
+    Rx = np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
+    p1, n1 = synth.apply_transform(p1 + shift, n1, np.eye(3), np.zeros(3))
+    p2, n2 = synth.apply_transform(p2 + shift, n2, Rx, np.zeros(3))
+    R, tr, s = synth.random_pose(rng)
+    P, N = synth.apply_transform(np.vstack([p1, p2]), np.vstack([n1, n2]), R, tr, s)
+    edge_dist = np.linalg.norm(np.vstack([p1, p2])[:, 1:], axis=1) * s
+    return P, R @ n1[0], R @ n2[0], edge_dist
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_voting_normals_at_a_sharp_edge_pick_one_side(seed):
+    P, na, nb, edge_dist = _roof(seed)
+    tree = cKDTree(P)
+    _, nbr = tree.query(P, k=16)
+    spacing = np.median(tree.query(P, k=2)[0][:, 1])
+    edge = edge_dist < 2.0 * spacing  # neighbourhoods straddle the edge
+    assert edge.sum() > 50
+
+    def side_error(N):  # angle to the closer of the two faces' normals
+        c = np.maximum(np.abs(N @ na), np.abs(N @ nb))
+        return np.degrees(np.arccos(np.clip(c, 0, 1)))
+
+    vote = side_error(voting_normals(P, nbr, seed=seed))[edge]
+    pca = side_error(pca_normals(P, nbr)[0])[edge]
+    assert np.median(vote) <= 3.0
+    assert (vote <= 5.0).mean() >= 0.7
+    # PCA averages the two sides there: the case really discriminates.
+    assert np.median(pca) >= 15.0
+    assert (pca <= 5.0).mean() <= 0.1
+
+
+@pytest.mark.parametrize("family,seed", [("plane", 0), ("cylinder", 1), ("sphere", 2), ("torus", 0)])
+def test_auto_chooses_voting_on_a_noisy_cloud(family, seed):
+    cloud = synth.single(family, seed, n_points=4000, noise=0.003)
+    assert preprocess(cloud.points).normals_method == "voting"
+
+
+@pytest.mark.parametrize("make", [
+    pytest.param(lambda: synth.single("plane", 0, n_points=4000), id="plane"),
+    pytest.param(lambda: synth.single("cylinder", 1, n_points=4000), id="cylinder"),
+    pytest.param(lambda: synth.single("torus", 2, n_points=4000), id="torus"),
+    pytest.param(lambda: synth.block_with_hole_and_slot(0, n_points=5000), id="block"),
+    pytest.param(lambda: synth.filleted_block(0, n_points=5000), id="filleted_block"),
+    pytest.param(lambda: synth.plate_with_holes(0, n_points=5000), id="plate", marks=pytest.mark.xfail(
+        strict=False, reason="clean plate_with_holes(0, 5000): the noise estimate (median local PCA residual, "
+        "k=16) is 0.226 x spacing > 0.2 because ~half the points have neighbourhoods across sharp edges "
+        "(hole rims, thin sides): auto picks voting on a noise-free cloud")),
+])
+def test_auto_chooses_pca_on_a_clean_cloud(make):
+    cloud = make()
+    assert preprocess(cloud.points).normals_method == "pca"
+
+
+def test_input_normals_are_used_as_given():
+    cloud = synth.single("cylinder", 0, n_points=2000, noise=0.003)
+    pre = preprocess(cloud.points, cloud.normals)
+    assert pre.normals_method == "input"
+    assert _normal_errors(cloud, pre).max() < 1e-4  # arccos near 1: ~1e-6° of rounding
+    with pytest.raises(ValueError):
+        preprocess(cloud.points, method="nonsense")
