@@ -99,16 +99,9 @@ SINGLE_SEEDS = (0, 1, 2)
 #: messages). Root cause of the curved-family failures at this noise: σ ≈ 1.25 × point spacing, and
 #: the k=16 normals are then ~40° off (median), so no placement/vote can find the primitive.
 KNOWN_FAILURES: dict[tuple[str, int], str] = {
-    ('plane', 1): 'largest plane covers 69.6%; its normal_deg 0.15, offset 0.03% of diag',
-    ('cylinder', 0): 'largest segment is a plane (32%); largest cylinder (6%): axis_deg 49.38, radius 13.57% of diag, axis_line 36.82% of diag',
-    ('cylinder', 1): 'largest segment is a plane (16%); largest cylinder (5%): axis_deg 11.47, radius 1.08% of diag, axis_line 5.46% of diag',
-    ('cylinder', 2): 'largest segment is a plane (34%); no cylinder segment at all',
     ('cone', 0): 'largest segment is a cylinder (26%); no cone segment at all',
     ('cone', 1): 'largest segment is a cylinder (26%); no cone segment at all',
     ('cone', 2): 'largest segment is a cylinder (22%); no cone segment at all',
-    ('sphere', 0): 'largest segment is a cylinder (36%); no sphere segment at all',
-    ('sphere', 1): 'largest segment is a cylinder (33%); no sphere segment at all',
-    ('sphere', 2): 'largest segment is a cylinder (37%); no sphere segment at all',
     ('torus', 0): 'largest segment is a cylinder (22%); no torus segment at all',
     ('torus', 1): 'largest segment is a plane (24%); no torus segment at all',
     ('torus', 2): 'largest segment is a cylinder (31%); no torus segment at all',
@@ -316,7 +309,7 @@ def test_segmenter_options_and_result(small_part):
     assert res.n_points == len(small_part.points)
     assert res.options["families"] == "plane,cylinder"
     assert res.options["epsilon"] == 0.02 and res.options["seed"] == 3 and res.options["min_points"] == 15
-    assert res.options["normals_used"] in ("pca", "voting")
+    assert res.options["normals_used"] == "voting" or res.options["normals_used"].startswith("pca")
     assert {"preprocess", "recognition", "splitting", "output", "total"} <= set(res.timing)
     assert res.segments and {s.type for s in res.segments} <= {"plane", "cylinder"}
     assert all(len(s.indices) >= 15 for s in res.segments)

@@ -197,9 +197,14 @@ def test_voting_normals_at_a_sharp_edge_pick_one_side(seed):
 
 
 @pytest.mark.parametrize("family,seed", [("plane", 0), ("cylinder", 1), ("sphere", 2), ("torus", 0)])
-def test_auto_chooses_voting_on_a_noisy_cloud(family, seed):
+def test_auto_widens_the_neighbourhood_on_a_noisy_cloud(family, seed):
+    # On noisy clouds `auto` keeps PCA but with 64 neighbours: measured better
+    # than the voting estimate there (see test_voting_normals_not_worse...).
     cloud = synth.single(family, seed, n_points=4000, noise=0.003)
-    assert preprocess(cloud.points).normals_method == "voting"
+    pre = preprocess(cloud.points)
+    assert pre.normals_method == "pca-k64"
+    err = np.degrees(np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", pre.transform.inv_dirs(pre.normals), cloud.normals)), 0, 1)))
+    assert np.median(err) <= 5.0
 
 
 @pytest.mark.parametrize("make", [
@@ -208,10 +213,7 @@ def test_auto_chooses_voting_on_a_noisy_cloud(family, seed):
     pytest.param(lambda: synth.single("torus", 2, n_points=4000), id="torus"),
     pytest.param(lambda: synth.block_with_hole_and_slot(0, n_points=5000), id="block"),
     pytest.param(lambda: synth.filleted_block(0, n_points=5000), id="filleted_block"),
-    pytest.param(lambda: synth.plate_with_holes(0, n_points=5000), id="plate", marks=pytest.mark.xfail(
-        strict=False, reason="clean plate_with_holes(0, 5000): the noise estimate (median local PCA residual, "
-        "k=16) is 0.226 x spacing > 0.2 because ~half the points have neighbourhoods across sharp edges "
-        "(hole rims, thin sides): auto picks voting on a noise-free cloud")),
+    pytest.param(lambda: synth.plate_with_holes(0, n_points=5000), id="plate"),
 ])
 def test_auto_chooses_pca_on_a_clean_cloud(make):
     cloud = make()

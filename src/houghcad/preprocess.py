@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .errors import InputError
 from .hough import direction_accumulator, refine_direction
 
 
@@ -214,11 +215,26 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         nrm = np.asarray(normals, float)
         nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
         used = "input"
-    elif method == "voting" or (method == "auto" and noise > 0.2 * spacing):
-        nrm = voting_normals(x, nbr, seed=seed)
-        used = "voting"
-    elif method not in ("auto", "pca"):
-        raise ValueError(f"unknown normals method {method!r}")
+    elif method == "input":
+        raise InputError("normals method 'input' needs normals in the input")
+    elif method not in ("auto", "pca", "voting"):
+        raise InputError(f"unknown normals method {method!r} (auto, pca, voting, input)")
+    else:
+        # Sharp edges alone push the estimate to ~0.2 spacings on clean parts.
+        if method != "pca" and noise > 0.3 * spacing and len(x) > k:
+            # Noisy cloud: a wider neighbourhood averages the noise out (at 1%
+            # of the diagonal, 64 neighbours give ~5° errors where 16 give 25°,
+            # measured on synthetic cylinders); the noise estimate improves too.
+            kk = int(min(64, len(x)))
+            dist, nbr = tree.query(x, k=kk)
+            nrm, ev = pca_normals(x, nbr)
+            noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
+            used = f"pca-k{kk}"
+        if method == "voting":
+            nrm = voting_normals(x, nbr, seed=seed)
+            used = "voting"
+    spacing = float(np.median(dist[:, 1]))
+    reach = float(np.median(dist[:, min(6, dist.shape[1] - 1)]))
 
     acc = direction_accumulator()
     H = acc.smooth(acc.vote(nrm))

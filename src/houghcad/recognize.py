@@ -233,8 +233,12 @@ def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candi
         for j in group[1:]:
             if _better(cands[j], cands[best]):
                 best = j
+        # Only the candidates that mostly overlap the winner are settled; a
+        # larger one that merely contains it stays in the running.
         for j in group:
-            done[j] = True
+            inter = np.intersect1d(sets[best], sets[j], assume_unique=True).size
+            if j == best or inter > 0.5 * min(len(sets[best]), len(sets[j])):
+                done[j] = True
         c = cands[best]
         avail = c.indices[free[c.indices]]
         if len(avail) < max(ctx.min_points, 0.6 * len(c.indices)):
@@ -251,7 +255,10 @@ def _better(a: Candidate, b: Candidate) -> bool:
     if ca == cb:
         return (a.mfe, -len(a.indices)) < (b.mfe, -len(b.indices))
     simple, cplx = (a, b) if ca < cb else (b, a)
-    cplx_wins = cplx.mfe < 0.5 * simple.mfe and simple.mfe - cplx.mfe > 2e-5
+    # The more complex family wins with a clearly lower error, or when it
+    # explains many more points about as well.
+    cplx_wins = (cplx.mfe < 0.5 * simple.mfe and simple.mfe - cplx.mfe > 2e-5) or (
+        len(cplx.indices) >= 1.5 * len(simple.indices) and cplx.mfe <= 1.25 * simple.mfe)
     return (a is cplx) == cplx_wins
 
 

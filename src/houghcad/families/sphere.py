@@ -36,14 +36,14 @@ class Sphere(Family):
     param_names = ("center", "radius")
     n_unknowns = 1
     complexity = 2
-    global_search = False
 
     def placements(self, P, N, ctx):
-        cents = list(center_votes(P, N, ctx, ctx.max_peaks))
-        if ctx.local:
-            c, cond = lines_intersection(P, N)
-            if cond > 1e-3:
-                cents.insert(0, c)
+        # Globally only the least-squares centre (cheap; right when one sphere
+        # dominates); clusters also get the centre votes.
+        cents = list(center_votes(P, N, ctx, ctx.max_peaks)) if ctx.local else []
+        c, cond = lines_intersection(P, N)
+        if cond > 1e-3:
+            cents.insert(0, c)
         return [Placement(np.eye(3), np.asarray(c, float)) for c in cents]
 
     def region(self, Pl, Nl, ctx):
