@@ -147,7 +147,7 @@ def test_voting_normals_on_a_noisy_plane_within_a_few_degrees(seed):
 
 
 @pytest.mark.xfail(strict=False, reason=(
-    "voting normals are worse than PCA on noisy smooth surfaces, and `auto` switches to them exactly "
+    "voting normals are worse than PCA on noisy smooth surfaces (so `auto` widens PCA instead); measured "
     "there: plane noise=0.001, seeds 0-2, median/90th-pct error voting 3.4°/7.4°, 3.4°/7.1°, 3.4°/7.3° "
     "vs pca 2.0°/3.8°, 2.1°/4.1°, 2.0°/3.8° (noise=0.002: 8.1°/19.0° vs 3.9°/8.0°)"))
 @pytest.mark.parametrize("seed", [0, 1, 2])
