@@ -106,6 +106,7 @@ def test_help_exits_zero(capsys):
     (["segment", "x.xyz", "--epsilon", "abc"], "--epsilon"),
     (["segment", "x.xyz", "--epsilon", "-0.1"], "--epsilon"),
     (["segment", "x.xyz", "--epsilon", "nan"], "--epsilon"),
+    (["segment", "x.xyz", "--epsilon", "0.7"], "--epsilon"),
     (["segment", "x.xyz", "--seed", "-1"], "--seed"),
     (["segment", "x.xyz", "--normals", "magic"], "--normals"),
     (["segment", "x.xyz", "--bogus"], "--bogus"),

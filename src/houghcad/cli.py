@@ -43,13 +43,13 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _fraction(text: str) -> float:
-    """``--epsilon``: a fraction of the bounding-box diagonal, 0 < F < 1."""
+    """``--epsilon``: a fraction of the bounding-box diagonal, 0 < F < 0.5 (as Segmenter)."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and 0.0 < value < 1.0):
-        raise argparse.ArgumentTypeError(f"{text} is not a fraction of the diagonal in (0, 1), e.g. 0.01")
+    if not (math.isfinite(value) and 0.0 < value < 0.5):
+        raise argparse.ArgumentTypeError(f"{text} is not a fraction of the diagonal in (0, 0.5), e.g. 0.01")
     return value
 
 
@@ -90,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: from the point spacing and the estimated noise)")
     p.add_argument("--seed", type=_seed, default=0, metavar="N", help="random seed (default: 0)")
     p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
-                   help="normals: 'auto' uses the file's normals if any, else PCA (voting on noisy "
+                   help="normals: 'auto' uses the file's normals if any, else PCA (with 64 neighbours on noisy "
                    "clouds); 'pca' and 'voting' always estimate them (default: auto)")
     p.add_argument("--fit4cad", metavar="DIR",
                    help="also write DIR/<input stem>_primitives.txt in the Fit4CAD ground-truth format")
