@@ -114,6 +114,40 @@ def _find(parent: np.ndarray, i: int) -> int:
 
 
 @numba.njit(cache=True)
+def _merge(parent, values, c, nb, v, peaks, pers, npk):
+    """Union of the components of cells c and nb at level v: the younger
+    (lower peak) dies, its persistence recorded. Returns the peak count."""
+    r1 = _find(parent, c)
+    r2 = _find(parent, nb)
+    if r1 == r2:
+        return npk
+    if values[r1] > values[r2] or (values[r1] == values[r2] and r1 < r2):
+        hi, lo = r1, r2
+    else:
+        hi, lo = r2, r1
+    if lo != c:
+        peaks[npk] = lo
+        pers[npk] = values[lo] - v
+        npk += 1
+    parent[lo] = hi
+    return npk
+
+
+@numba.njit(cache=True)
+def _survivors(values, order, parent, peaks, pers, npk):
+    """Components alive at the lowest level: persistence = their peak value."""
+    for t in range(values.size):
+        c = order[t]
+        if values[c] <= 0:
+            break
+        if parent[c] == c:
+            peaks[npk] = c
+            pers[npk] = values[c]
+            npk += 1
+    return peaks[:npk], pers[:npk]
+
+
+@numba.njit(cache=True)
 def _persistence_grid(values: np.ndarray, shape: np.ndarray, wrap: np.ndarray, offsets: np.ndarray):
     """0-dimensional persistence of the superlevel sets of a grid function.
 
@@ -156,30 +190,8 @@ def _persistence_grid(values: np.ndarray, shape: np.ndarray, wrap: np.ndarray, o
                 nb += x * strides[d]
             if not ok or parent[nb] < 0:
                 continue
-            r1 = _find(parent, c)
-            r2 = _find(parent, nb)
-            if r1 == r2:
-                continue
-            # The younger component (lower peak) dies at level v.
-            if values[r1] > values[r2] or (values[r1] == values[r2] and r1 < r2):
-                hi, lo = r1, r2
-            else:
-                hi, lo = r2, r1
-            if lo != c:
-                peaks[npk] = lo
-                pers[npk] = values[lo] - v
-                npk += 1
-            parent[lo] = hi
-    # Surviving components: persistence up to the lowest level (0).
-    for t in range(n):
-        c = order[t]
-        if values[c] <= 0:
-            break
-        if parent[c] == c:
-            peaks[npk] = c
-            pers[npk] = values[c]
-            npk += 1
-    return peaks[:npk], pers[:npk]
+            npk = _merge(parent, values, c, nb, v, peaks, pers, npk)
+    return _survivors(values, order, parent, peaks, pers, npk)
 
 
 def _offsets(ndim: int) -> np.ndarray:
@@ -262,28 +274,8 @@ def _persistence_graph(values: np.ndarray, indptr: np.ndarray, indices: np.ndarr
             nb = indices[j]
             if parent[nb] < 0:
                 continue
-            r1 = _find(parent, c)
-            r2 = _find(parent, nb)
-            if r1 == r2:
-                continue
-            if values[r1] > values[r2] or (values[r1] == values[r2] and r1 < r2):
-                hi, lo = r1, r2
-            else:
-                hi, lo = r2, r1
-            if lo != c:
-                peaks[npk] = lo
-                pers[npk] = values[lo] - v
-                npk += 1
-            parent[lo] = hi
-    for t in range(n):
-        c = order[t]
-        if values[c] <= 0:
-            break
-        if parent[c] == c:
-            peaks[npk] = c
-            pers[npk] = values[c]
-            npk += 1
-    return peaks[:npk], pers[:npk]
+            npk = _merge(parent, values, c, nb, v, peaks, pers, npk)
+    return _survivors(values, order, parent, peaks, pers, npk)
 
 
 class DirectionAccumulator:
@@ -384,3 +376,37 @@ def refine_direction(d: np.ndarray, dirs: np.ndarray, max_angle: float, weights:
     _, vec = np.linalg.eigh(S)
     out = vec[:, -1]
     return out if out @ d >= 0 else -out
+
+
+def normal_line_peaks(Q: np.ndarray, M: np.ndarray, lower: np.ndarray, width: float, bins: int, smax: float,
+                      persistence: float, min_votes: float, max_peaks: int) -> np.ndarray:
+    """Points where many normal lines meet (circle or sphere centres).
+
+    Parameters
+    ----------
+    Q, M : ndarray, shape (n, d)
+        Points and their unit normals (d = 2 or 3).
+    lower : ndarray, shape (d,)
+        Lower corner of the cubic box voted over; ``width`` its side.
+    bins : int
+        Cells per side.
+    smax : float
+        Each point votes at distances up to ``smax`` along its normal line,
+        both ways, one sample per cell width.
+
+    Returns
+    -------
+    ndarray, shape (k, d)
+        Persistent peak cell centres with at least ``min_votes`` votes.
+    """
+    d = Q.shape[1]
+    cw = width / bins
+    s = np.arange(cw, smax, cw)
+    s = np.concatenate([-s, s])
+    C = (Q[:, None, :] + s[None, :, None] * M[:, None, :]).reshape(-1, d)
+    voter = np.repeat(np.arange(len(Q)), len(s))
+    g = Grid(tuple(lower), tuple(np.asarray(lower) + width), (bins,) * d)
+    H = smooth(accumulate(g, voter, C))
+    pk, _ = persistent_peaks(H, persistence, max_peaks=max_peaks)
+    pk = pk[H.ravel()[pk] >= min_votes]
+    return g.cell_center(pk)

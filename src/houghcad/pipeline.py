@@ -143,21 +143,19 @@ class Segmenter:
         T = pre.transform
         out: list[Segment] = []
         segments = sorted(segments, key=lambda c: (-len(c.indices), int(c.indices[0])))
+        # Final refits may reach any radius below 1e9 (standard units).
+        check = Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0, max_radius=1e9)
         for c in segments:
             P, N = pre.points[c.indices], pre.normals[c.indices]
             sel = np.arange(len(P)) if len(P) <= 4000 else np.sort(rng.choice(len(P), 4000, replace=False))
             prim = c.family.fit(c.prim, P[sel], N[sel])
-            if prim is None or not c.family.valid(prim, replace(self._dummy_ctx(pre), max_radius=1e9)):
+            if prim is None or not c.family.valid(prim, check):
                 prim = c.prim
             d = c.family.distance(prim, P) / T.scale
             mfe = mean_fitting_error(d, points[c.indices])
             out.append(Segment(id=len(out), type=c.family.name, indices=np.sort(c.indices).astype(np.int64),
                                params=c.family.to_world(prim, T), mfe=mfe))
         return out
-
-    @staticmethod
-    def _dummy_ctx(pre) -> Context:
-        return Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0)
 
 
 def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="simple",

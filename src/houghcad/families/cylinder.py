@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..hough import Grid, accumulate, direction_accumulator, persistent_peaks, refine_direction, smooth
+from ..hough import Grid, direction_accumulator, normal_line_peaks, refine_direction
 from ..preprocess import rotation_to_z
 from .base import Family, Placement, Primitive, gauss_newton, radial, register, tangent_basis, unit
 
@@ -37,23 +37,11 @@ def circle_centers(Q, M, ctx, max_centers):
     """Circle centres of 2-D points Q (n, 2) with unit normals M (n, 2): each
     point votes along its normal line (the 2-D circle vote)."""
     lo = Q.min(axis=0)
-    hi = Q.max(axis=0)
-    ext = float((hi - lo).max())
+    ext = float((Q.max(axis=0) - lo).max())
     if ext <= 0:
         return np.zeros((0, 2))
     nb = int(np.clip(ext / max(2 * ctx.cell, ctx.spacing), 16, 160))
-    cw = ext / nb
-    smax = 0.5 * ext * 1.05
-    s = np.arange(cw, smax, cw)
-    s = np.concatenate([-s, s])
-    C = (Q[:, None, :] + s[None, :, None] * M[:, None, :]).reshape(-1, 2)
-    voter = np.repeat(np.arange(len(Q)), len(s))
-    pad = 0.0
-    g = Grid((lo[0] - pad, lo[1] - pad), (lo[0] + ext + pad, lo[1] + ext + pad), (nb, nb))
-    H = smooth(accumulate(g, voter, C))
-    pk, _ = persistent_peaks(H, ctx.persistence, max_peaks=max_centers)
-    pk = pk[H.ravel()[pk] >= ctx.min_votes]
-    return g.cell_center(pk)
+    return normal_line_peaks(Q, M, lo, ext, nb, 0.5 * ext * 1.05, ctx.persistence, ctx.min_votes, max_centers)
 
 
 @register

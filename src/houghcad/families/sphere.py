@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..hough import Grid, accumulate, persistent_peaks, smooth
+from ..hough import Grid, normal_line_peaks
 from .base import Family, Placement, Primitive, gauss_newton, lines_intersection, register, unit
 
 
@@ -15,19 +15,10 @@ def center_votes(P, N, ctx, max_centers):
     ext = float((hi - lo).max())
     if ext <= 0:
         return np.zeros((0, 3))
-    c = 0.5 * (lo + hi)
     half = 0.5 * ext * 1.5
     nb = int(np.clip(ext / max(2 * ctx.cell, ctx.spacing), 12, 56))
-    cw = 2 * half / nb
-    s = np.arange(cw, half, cw)
-    s = np.concatenate([-s, s])
-    C = (P[:, None, :] + s[None, :, None] * N[:, None, :]).reshape(-1, 3)
-    voter = np.repeat(np.arange(len(P)), len(s))
-    g = Grid(tuple(c - half), tuple(c + half), (nb,) * 3)
-    H = smooth(accumulate(g, voter, C))
-    pk, _ = persistent_peaks(H, ctx.persistence, max_peaks=max_centers)
-    pk = pk[H.ravel()[pk] >= ctx.min_votes]
-    return g.cell_center(pk)
+    return normal_line_peaks(P, N, 0.5 * (lo + hi) - half, 2 * half, nb, half, ctx.persistence, ctx.min_votes,
+                             max_centers)
 
 
 @register
