@@ -36,6 +36,12 @@ class Segment:
     mfe : float
         Mean fitting error, eq. (1) of the paper: mean distance to the primitive
         divided by the diagonal of the segment's axis-aligned bounding box.
+    parts : list of Part
+        The connected pieces (faces) of a maximal primitive, when it has more
+        than one; empty otherwise (the segment is its own single part).
+    descriptors : dict
+        Position-independent descriptors (``radius``, ``half_angle``,
+        ``extent`` ...), world units.
     """
 
     id: int
@@ -43,16 +49,26 @@ class Segment:
     indices: np.ndarray
     params: dict[str, Any]
     mfe: float
+    parts: list["Part"] = field(default_factory=list)
+    descriptors: dict[str, Any] = field(default_factory=dict)
+
+    def faces(self) -> list[np.ndarray]:
+        """Index arrays of the segment's connected pieces (one when it has no parts)."""
+        return [p.indices for p in self.parts] if self.parts else [self.indices]
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        d = {
             "id": int(self.id),
             "type": self.type,
             "n_points": int(len(self.indices)),
             "mfe": float(self.mfe),
             "params": _jsonable(self.params),
+            "descriptors": _jsonable(self.descriptors),
             "indices": [int(i) for i in self.indices],
         }
+        if self.parts:
+            d["parts"] = [p.to_dict() for p in self.parts]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Segment":
@@ -62,7 +78,68 @@ class Segment:
             indices=np.asarray(d["indices"], dtype=np.int64),
             params=dict(d.get("params", {})),
             mfe=float(d.get("mfe", float("nan"))),
+            parts=[Part.from_dict(p) for p in d.get("parts", [])],
+            descriptors=dict(d.get("descriptors", {})),
         )
+
+
+@dataclass
+class Part:
+    """One connected piece of a maximal primitive, with its own fit.
+
+    Attributes
+    ----------
+    indices : ndarray of int64, shape (M,)
+        0-based input indices, sorted.
+    params : dict
+        The piece's own parameters (world coordinates).
+    mfe : float
+    """
+
+    indices: np.ndarray
+    params: dict[str, Any]
+    mfe: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"n_points": int(len(self.indices)), "mfe": float(self.mfe),
+                "params": _jsonable(self.params), "indices": [int(i) for i in self.indices]}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "Part":
+        return cls(indices=np.asarray(d["indices"], dtype=np.int64), params=dict(d.get("params", {})),
+                   mfe=float(d.get("mfe", float("nan"))))
+
+
+#: Kinds of :class:`Group`, in the order they are reported.
+GROUP_KINDS = ("same_primitive", "translation", "rotation", "reflection", "coaxial", "parallel")
+
+
+@dataclass
+class Group:
+    """A relation between segments found by the association step (paper §5.4).
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`GROUP_KINDS`.
+    members : list of int
+        Segment ids, ascending.
+    descriptors : dict
+        What the members share (``radius``, ``axis`` ...), world units.
+    """
+
+    kind: str
+    members: list[int]
+    descriptors: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "members": [int(m) for m in self.members],
+                "descriptors": _jsonable(self.descriptors)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "Group":
+        return cls(kind=str(d["kind"]), members=[int(m) for m in d["members"]],
+                   descriptors=dict(d.get("descriptors", {})))
 
 
 @dataclass
@@ -82,6 +159,8 @@ class Result:
         The options the run used.
     source : str or None
         Path of the input file, when there was one.
+    groups : list of Group
+        Relations between segments (association step).
     """
 
     n_points: int
@@ -90,6 +169,7 @@ class Result:
     timing: dict[str, float] = field(default_factory=dict)
     options: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
+    groups: list[Group] = field(default_factory=list)
 
     def labels(self) -> np.ndarray:
         """Per-point segment id, shape (n_points,), -1 for unsegmented points."""
@@ -98,16 +178,35 @@ class Result:
             lab[s.indices] = s.id
         return lab
 
+    def group_labels(self) -> np.ndarray:
+        """Per-point id of the first translation/rotation/reflection/same-primitive
+        group holding the point's segment, shape (n_points,), -1 for none."""
+        seg_group = np.full(len(self.segments), -1, dtype=np.int64)
+        for g_id, g in enumerate(self.groups):
+            if g.kind in ("coaxial", "parallel"):
+                continue  # relations, not features: they would hide the patterns
+            for m in g.members:
+                if 0 <= m < len(seg_group) and seg_group[m] < 0:
+                    seg_group[m] = g_id
+        lab = self.labels()
+        return np.where(lab >= 0, seg_group[np.maximum(lab, 0)], -1)
+
+    def faces(self) -> list[np.ndarray]:
+        """Index arrays of every connected piece of every segment (the unit the
+        Fit4CAD ground truth uses)."""
+        return [f for s in self.segments for f in s.faces()]
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "format": "houghcad-result",
-            "version": 1,
+            "version": 2,
             "source": self.source,
             "n_points": int(self.n_points),
             "segments": [s.to_dict() for s in self.segments],
             "unsegmented": [int(i) for i in self.unsegmented],
             "timing": {k: float(v) for k, v in self.timing.items()},
             "options": _jsonable(self.options),
+            "groups": [g.to_dict() for g in self.groups],
         }
 
     @classmethod
@@ -119,6 +218,7 @@ class Result:
             timing=dict(d.get("timing", {})),
             options=dict(d.get("options", {})),
             source=d.get("source"),
+            groups=[Group.from_dict(g) for g in d.get("groups", [])],
         )
 
     def to_json(self) -> str:
