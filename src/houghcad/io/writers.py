@@ -18,7 +18,7 @@ from typing import IO, Any
 
 import numpy as np
 
-__all__ = ["atomic_write", "write_json", "write_fit4cad_primitives", "write_points_ply"]
+__all__ = ["atomic_write", "write_json", "write_fit4cad_primitives", "write_points_ply", "write_result_ply"]
 
 
 @contextlib.contextmanager
@@ -200,6 +200,34 @@ def write_points_ply(
     ply = PlyData([PlyElement.describe(vertex, "vertex")], text=not binary, byte_order="<")
     with atomic_write(path, "wb") as f:
         ply.write(f)
+
+
+def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: Any) -> None:
+    """Write a segmented cloud as a coloured binary PLY for CloudCompare, MeshLab ..., atomically.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination ``.ply`` file.
+    points : array_like, shape (N, 3)
+        The input cloud in world coordinates (``N == result.n_points``).
+    result : houghcad.result.Result
+        Its segmentation.
+
+    The ``vertex`` element has ``x y z`` (float64), the int32 scalar fields
+    ``segment`` (segment id, -1 unsegmented), ``type`` (family code of
+    :data:`houghcad.palette.TYPE_CODES`, -1 unsegmented, 0 unknown family) and
+    ``group`` (:meth:`~houghcad.result.Result.group_labels`, -1 none), and the
+    uchar colours ``red green blue`` (:func:`houghcad.palette.point_colors`,
+    one shade of the type colour per segment).
+    """
+    from ..palette import point_colors, point_type_codes
+
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[0] != result.n_points:
+        raise ValueError(f"points must have shape ({result.n_points}, 3), got {pts.shape}")
+    fields = {"segment": result.labels(), "type": point_type_codes(result), "group": result.group_labels()}
+    write_points_ply(path, pts, fields=fields, colors=point_colors(result, "segment"))
 
 
 def _colors_to_uint8(colors: np.ndarray, n: int) -> np.ndarray:

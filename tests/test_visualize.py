@@ -1,0 +1,358 @@
+"""Outputs a person looks at: palette, coloured PLY, PNG views, HTML report (and in headless Chromium)."""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import re
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from houghcad import palette
+from houghcad.htmlreport import build_html_report, plotly_js, write_html_report
+from houghcad.io.writers import write_result_ply
+from houghcad.render import draw_sample, render_png
+from houghcad.result import Group, Result, Segment
+
+# --------------------------------------------------------------------------- fixtures
+
+
+def _hand_result(seed: int = 0) -> tuple[np.ndarray, Result]:
+    """600 points in 6 hand-made segments (3 planes, 2 cylinders, 1 sphere), 20 unsegmented, 2 groups."""
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-1.0, 1.0, size=(620, 3)) * [10.0, 5.0, 2.0] + [1000.0, -20.0, 3.0]
+    perm = rng.permutation(620)
+    types = ["plane", "cylinder", "plane", "sphere", "plane", "cylinder"]
+    segs = [Segment(i, t, np.sort(perm[100 * i:100 * (i + 1)]).astype(np.int64),
+                    {"radius": 1.5 + i, "axis": [0.0, 0.0, 1.0]} if t != "plane" else
+                    {"normal": [0.0, 0.0, 1.0], "offset": float(i), "point": [0.0, 0.0, float(i)]},
+                    1e-3 * (i + 1), descriptors={"radius": 1.5 + i} if t != "plane" else {})
+            for i, t in enumerate(types)]
+    groups = [Group("translation", [1, 5], {"radius": 2.5}), Group("parallel", [0, 2, 4], {"normal": [0, 0, 1]})]
+    res = Result(n_points=620, segments=segs, unsegmented=np.sort(perm[600:]).astype(np.int64),
+                 timing={"preprocess": 0.25, "recognition": 1.5, "total": 1.8}, options={"seed": 0},
+                 source="hand.xyz", groups=groups)
+    return pts, res
+
+
+# --------------------------------------------------------------------------- palette
+
+
+def test_palette_base_colours_follow_the_paper():
+    r, g, b = (np.array(palette.type_color(t)) for t in ("plane", "cylinder", "cone"))
+    assert r.argmax() == 0 and g.argmax() == 1 and b.argmax() == 2  # red, green, blue
+    assert max(palette.type_color("torus")) < 40  # black
+    sph = np.array(palette.type_color("sphere"))
+    assert sph[0] > 150 and sph[2] > 150 and sph[1] < 100  # magenta
+    assert palette.UNSEGMENTED_COLOR[0] > 200 and palette.UNSEGMENTED_COLOR[1] > 180 and palette.UNSEGMENTED_COLOR[2] < 60
+    complex_types = ["ellipsoid", "generalized_cylinder", "generalized_cone", "surface_of_revolution",
+                     "helical_surface", "helical_strip", "annulus"]
+    everything = [palette.type_color(t) for t in palette.TYPE_CODES] + [palette.UNSEGMENTED_COLOR]
+    assert len(set(everything)) == len(everything)  # one colour per family
+    assert set(complex_types) <= set(palette.TYPE_CODES)
+    codes = list(palette.TYPE_CODES.values())
+    assert len(set(codes)) == len(codes) and min(codes) == 1
+    assert palette.type_code("no_such_family") == 0 and palette.type_color("no_such_family") == palette.OTHER_COLOR
+
+
+@pytest.mark.parametrize("family", sorted(palette.TYPE_CODES))
+def test_segment_shades_are_distinct_and_deterministic(family):
+    types = [family] * 12 + ["cylinder" if family != "cylinder" else "plane"]
+    cols = palette.segment_colors(types)
+    assert cols.shape == (13, 3) and cols.dtype == np.uint8
+    np.testing.assert_array_equal(cols, palette.segment_colors(types))
+    assert tuple(cols[0]) == palette.type_color(family)  # the first segment of a type: its base colour
+    same = cols[:12].astype(int)
+    dist = np.abs(same[:, None, :] - same[None, :, :]).sum(axis=2)
+    assert dist[np.triu_indices(12, 1)].min() >= 25  # no two shades alike
+    assert np.abs(np.diff(same, axis=0)).sum(axis=1).min() >= 35  # consecutive ids clearly apart
+
+
+def test_point_colours_and_codes():
+    pts, res = _hand_result()
+    by_seg, by_type = palette.point_colors(res, "segment"), palette.point_colors(res, "type")
+    lab = res.labels()
+    assert by_seg.shape == (620, 3) and by_seg.dtype == np.uint8
+    assert (by_seg[lab < 0] == palette.UNSEGMENTED_COLOR).all()
+    assert (by_type[res.segments[2].indices] == palette.type_color("plane")).all()
+    assert len({tuple(c) for c in by_seg[lab >= 0]}) == 6  # every segment its own colour
+    assert len({tuple(c) for c in by_type[lab >= 0]}) == 3
+    codes = palette.point_type_codes(res)
+    assert codes[lab < 0].tolist() == [-1] * 20
+    assert set(codes[res.segments[3].indices]) == {palette.TYPE_CODES["sphere"]}
+
+
+# --------------------------------------------------------------------------- PLY
+
+
+def test_result_ply_round_trip(tmp_path):
+    from plyfile import PlyData
+
+    pts, res = _hand_result()
+    path = tmp_path / "out.ply"
+    write_result_ply(path, pts, res)
+    ply = PlyData.read(str(path))
+    assert ply.byte_order == "<" and not ply.text  # binary little-endian
+    v = ply["vertex"].data
+    assert {"x", "y", "z", "segment", "type", "group", "red", "green", "blue"} <= set(v.dtype.names)
+    np.testing.assert_array_equal(np.column_stack([v["x"], v["y"], v["z"]]), pts)  # float64, exact
+    np.testing.assert_array_equal(v["segment"], res.labels())
+    np.testing.assert_array_equal(v["type"], palette.point_type_codes(res))
+    np.testing.assert_array_equal(v["group"], res.group_labels())
+    assert set(v["group"][res.segments[1].indices]) == {0} and set(v["group"][res.segments[0].indices]) == {-1}
+    rgb = np.column_stack([v["red"], v["green"], v["blue"]])
+    np.testing.assert_array_equal(rgb, palette.point_colors(res, "segment"))
+    assert v["red"].dtype == np.uint8
+    assert [p.name for p in tmp_path.iterdir()] == ["out.ply"]  # no temporary file left
+
+
+def test_result_ply_rejects_wrong_point_count(tmp_path):
+    pts, res = _hand_result()
+    with pytest.raises(ValueError, match="620"):
+        write_result_ply(tmp_path / "out.ply", pts[:10], res)
+    assert not any(tmp_path.iterdir())
+
+
+# --------------------------------------------------------------------------- PNG
+
+
+def _png_pixels(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(path) as im:
+        assert im.format == "PNG"
+        return np.asarray(im.convert("RGB"))
+
+
+def test_png_views(tmp_path):
+    pts, res = _hand_result()
+    path = tmp_path / "views.png"
+    render_png(path, pts, res)
+    img = _png_pixels(path)
+    assert img.shape == (850, 1600, 3)
+    colours = {tuple(c) for c in img.reshape(-1, 3)[::7]}
+    assert len(colours) > 20
+    flat = img.reshape(-1, 3).astype(int)
+    for rgb in (palette.type_color("plane"), palette.type_color("cylinder"), palette.type_color("sphere"),
+                palette.UNSEGMENTED_COLOR, tuple(palette.segment_colors(["plane", "plane"])[1])):
+        near = np.abs(flat - np.array(rgb)).sum(axis=1) <= 12
+        assert near.sum() > 20, rgb  # each type, a second shade, and the unsegmented points are drawn
+    assert [p.name for p in tmp_path.iterdir()] == ["views.png"]
+
+
+def test_png_failure_leaves_nothing(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    pts, res = _hand_result()
+
+    def boom(self, *a, **k):
+        raise RuntimeError("disk on fire")
+
+    monkeypatch.setattr(Figure, "savefig", boom)
+    with pytest.raises(RuntimeError):
+        render_png(tmp_path / "views.png", pts, res)
+    assert not any(tmp_path.iterdir())
+
+
+def test_draw_sample_is_deterministic_and_bounded():
+    np.testing.assert_array_equal(draw_sample(100, 1000), np.arange(100))
+    a, b = draw_sample(100_000, 5000), draw_sample(100_000, 5000)
+    np.testing.assert_array_equal(a, b)
+    assert len(np.unique(a)) == 5000 and (np.diff(a) > 0).all() and a[-1] < 100_000
+
+
+# --------------------------------------------------------------------------- HTML (static checks)
+
+
+def _embedded(html_text: str) -> dict:
+    m = re.search(r'<script type="application/json" id="houghcad-data">(.*?)</script>', html_text, re.S)
+    assert m
+    return json.loads(m.group(1))
+
+
+def test_html_report_is_self_contained(tmp_path):
+    pts, res = _hand_result()
+    path = tmp_path / "report.html"
+    write_html_report(path, pts, res)
+    text = path.read_text(encoding="utf-8")
+    lib = plotly_js()
+    assert lib in text  # plotly.js inlined whole
+    own = text.replace(lib, "")
+    # Outside the library (whose source mentions URLs it never fetches here), no URL at all.
+    assert not re.search(r"(?i)(https?:|wss?:|ftp:)?//[a-z0-9.-]+\.[a-z]{2,}", own)
+    assert not re.search(r"(?i)<script[^>]*\bsrc\s*=|<link\b|<img\b|<iframe\b|@import|url\(", own)
+    csp = re.search(r'http-equiv="Content-Security-Policy" content="([^"]*)"', own).group(1)
+    assert "default-src 'none'" in csp and "connect-src 'none'" in csp and "font-src 'none'" in csp
+    data = _embedded(text)
+    assert data["config"]["typesetMath"] is False and data["config"]["showLink"] is False
+    assert [t["id"] for t in data["traces"]] == [0, 1, 2, 3, 4, 5, -1]
+    assert [t["drawn"] for t in data["traces"]] == [100] * 6 + [20]
+
+
+def test_html_report_points_and_tables():
+    pts, res = _hand_result()
+    text = build_html_report(pts, res)
+    data = _embedded(text)
+    xyz = np.frombuffer(base64.b64decode(data["xyz"]), dtype="<f4").reshape(3, -1).T + data["centre"]
+    lab = res.labels()
+    order = np.argsort(np.where(lab < 0, 99, lab), kind="stable")
+    np.testing.assert_allclose(xyz, pts[order], rtol=0, atol=1e-5 * 20)  # float32 offsets: ~7 digits
+    rows = re.findall(r'<tr data-segment-id="(\d+)"><td class="num">\d+</td><td>.*?</span>(\w+)</td>'
+                      r'<td class="num">(\d+)</td>', text)
+    assert [(int(i), t, int(n)) for i, t, n in rows] == [(s.id, s.type, len(s.indices)) for s in res.segments]
+    assert len(re.findall(r"<tr data-group-id=", text)) == 2
+    assert "translation" in text and "radius = 2.5" in text
+    assert re.search(r"<td>recognition</td><td class=\"num\">1.500</td>", text)
+
+
+def test_html_report_size_for_50k_points():
+    rng = np.random.default_rng(1)
+    n = 50_000
+    pts = rng.normal(size=(n, 3)) * 100.0
+    bounds = np.linspace(0, n - 500, 41).astype(int)
+    segs = [Segment(i, ["plane", "cylinder", "cone", "sphere", "torus"][i % 5], np.arange(a, b, dtype=np.int64), {}, 1e-3)
+            for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))]
+    res = Result(n, segs, np.arange(n - 500, n, dtype=np.int64))
+    text = build_html_report(pts, res)
+    assert _embedded(text)["n_drawn"] == n
+    size = len(text.encode("utf-8"))
+    assert size < 15e6
+    assert size - len(plotly_js()) < 16 * n + 200_000  # 12 bytes of float32 per point, base64
+
+
+def test_html_report_subsamples_huge_clouds():
+    pts, res = _hand_result()
+    data = _embedded(build_html_report(pts, res, max_points=100))
+    assert data["n_drawn"] == 100 and sum(t["drawn"] for t in data["traces"]) == 100
+    assert len(base64.b64decode(data["xyz"])) == 100 * 12
+
+
+# --------------------------------------------------------------------------- HTML in headless Chromium
+
+CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
+
+
+def _browser_missing() -> str | None:
+    for exe in (CHROMIUM, CHROMEDRIVER):
+        if not os.access(exe, os.X_OK):
+            return f"{exe} not installed (Debian packages chromium and chromium-driver; .ci/run installs them)"
+    try:
+        import selenium  # noqa: F401
+    except ImportError:
+        return "selenium not installed (pip install '.[test]')"
+    return None
+
+
+@pytest.fixture(scope="module")
+def browser():
+    reason = _browser_missing()
+    if reason:
+        pytest.skip(reason)
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    profile = tempfile.mkdtemp(prefix="houghcad-chromium-")
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM  # never let selenium look for (or download) a browser
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                "--disable-extensions", "--window-size=1400,1000", f"--user-data-dir={profile}"):
+        opts.add_argument(arg)
+    opts.set_capability("goog:loggingPrefs", {"performance": "ALL"})
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def cli_outputs(tmp_path_factory):
+    """A real run: `houghcad segment` of a synthetic block with every output."""
+    from houghcad.cli import main
+    from houghcad.synth import block_with_hole_and_slot
+
+    d = tmp_path_factory.mktemp("cli")
+    cloud = block_with_hole_and_slot(seed=0, n_points=4000)
+    np.savetxt(d / "block.xyz", cloud.points, fmt="%.9f")
+    argv = ["segment", str(d / "block.xyz"), "-o", str(d / "block.json"), "--ply", str(d / "block.ply"),
+            "--png", str(d / "block.png"), "--report", str(d / "block.html"), "--quiet"]
+    assert main(argv) == 0
+    return d, cloud
+
+
+def _load(driver, path: Path, timeout: float = 60.0):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    driver.get_log("performance")  # drop what earlier pages logged
+    driver.get(path.resolve().as_uri())
+    WebDriverWait(driver, timeout).until(
+        lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-rendered") == "1")
+
+
+def _requested_urls(driver) -> set[str]:
+    urls = set()
+    for entry in driver.get_log("performance"):
+        msg = json.loads(entry["message"])["message"]
+        if msg["method"] == "Network.requestWillBeSent":
+            urls.add(msg["params"]["request"]["url"])
+    return urls
+
+
+def test_cli_outputs_match_the_json(cli_outputs):
+    from plyfile import PlyData
+
+    d, cloud = cli_outputs
+    res = Result.from_dict(json.loads((d / "block.json").read_text()))
+    v = PlyData.read(str(d / "block.ply"))["vertex"].data
+    np.testing.assert_array_equal(v["segment"], res.labels())
+    np.testing.assert_array_equal(v["type"], palette.point_type_codes(res))
+    np.testing.assert_array_equal(v["group"], res.group_labels())
+    np.testing.assert_allclose(np.column_stack([v["x"], v["y"], v["z"]]), cloud.points, atol=1e-8)
+    assert _png_pixels(d / "block.png").shape == (850, 1600, 3)
+
+
+def test_report_renders_in_headless_chromium(browser, cli_outputs):
+    from PIL import Image
+    from selenium.webdriver.common.by import By
+
+    d, _ = cli_outputs
+    res = Result.from_dict(json.loads((d / "block.json").read_text()))
+    _load(browser, d / "block.html")
+
+    # Nothing but the file itself was requested: no CDN, font, MathJax or tile.
+    urls = _requested_urls(browser)
+    assert d.joinpath("block.html").resolve().as_uri() in urls
+    assert not [u for u in urls if not u.startswith(("file:", "data:", "blob:", "chrome:", "about:"))], urls
+
+    # The table: one row per segment, with the JSON's ids, types and point counts.
+    rows = browser.find_elements(By.CSS_SELECTOR, "#segments tbody tr")
+    cells = [[c.text for c in r.find_elements(By.TAG_NAME, "td")[:3]] for r in rows]
+    assert cells == [[str(s.id), s.type, str(len(s.indices))] for s in res.segments]
+    assert browser.find_element(By.ID, "n-segments").text == str(len(res.segments))
+
+    # The 3-D view drew the points: many non-background pixels, in the palette's colours.
+    plot = browser.find_element(By.ID, "plot")
+    img = np.asarray(Image.open(__import__("io").BytesIO(plot.screenshot_as_png)).convert("RGB")).astype(int)
+    plane_red = np.array(palette.type_color("plane"))
+    coloured = (np.abs(img - img[2, 2]).sum(axis=2) > 60)  # differs from the background corner
+    assert coloured.mean() > 0.02
+    assert (np.abs(img - plane_red).sum(axis=2) < 30).sum() > 50
+    n_traces = browser.execute_script("return document.getElementById('plot').data.length")
+    assert n_traces == len(res.segments) + 1
+
+    # Toggles: unticking the plane type hides every plane trace, and only those.
+    browser.find_element(By.ID, "type-0").click()
+    vis = browser.execute_script("return document.getElementById('plot').data.map(t => t.visible)")
+    expect = [s.type != "plane" for s in res.segments] + [True]
+    assert vis == expect
+    browser.find_element(By.ID, "all").click()
+    vis = browser.execute_script("return document.getElementById('plot').data.map(t => t.visible)")
+    assert vis == [True] * (len(res.segments) + 1)
