@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.resources
+import io
 import json
 import subprocess
 import sys
@@ -394,6 +395,8 @@ def test_demo_real(tmp_path, capsys):
     assert capsys.readouterr() == ("", "")
     data = json.loads((tmp_path / "demo" / "demo_part_segments.json").read_text())
     assert data["n_points"] > 0 and data["segments"]
+    for name in ("demo_part_segments.ply", "demo_part_segments.png", "demo_part_report.html"):
+        assert (tmp_path / "demo" / name).stat().st_size > 1000
 
 
 # --------------------------------------------------------------------------- report
@@ -414,3 +417,153 @@ def test_summary_table_layout():
     assert rows["time"][1] == "0.70"  # the pipeline's own total wins over the sum of stages
     assert list(rows).index("plane") < list(rows).index("cylinder")
     assert len({len(line) for line in lines[:2]}) == 1
+
+
+# --------------------------------------------------------------------------- pictures, PLY, report, progress (stub pipeline)
+
+
+def _grouped_result(n_points: int, source: str | None = None) -> Result:
+    from houghcad.result import Group
+
+    res = _fake_result(n_points, source)
+    res.groups = [Group("translation", [0, 1], {"radius": 2.0, "offset": [1.0, 0.0, 0.0]})]
+    return res
+
+
+def test_segment_writes_ply_png_report(tmp_path, capsys, fake_pipeline):
+    from plyfile import PlyData
+
+    from houghcad.palette import point_colors
+
+    inp = _write_xyz(tmp_path / "part.xyz", _blob(300))
+    fake_pipeline.behaviour = _grouped_result
+    paths = {ext: tmp_path / f"out.{ext}" for ext in ("ply", "png", "html")}
+    argv = ["segment", str(inp), "-o", str(tmp_path / "r.json"), "--ply", str(paths["ply"]),
+            "--png", str(paths["png"]), "--report", str(paths["html"])]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    for p in paths.values():
+        assert f"wrote {p}" in out
+    assert "translation" in out and "radius 2" in out  # the groups follow the family table
+    res = _grouped_result(300)
+    v = PlyData.read(str(paths["ply"]))["vertex"].data
+    np.testing.assert_array_equal(v["segment"], res.labels())
+    np.testing.assert_array_equal(v["group"], res.group_labels())
+    assert set(v["group"]) == {0, -1}
+    np.testing.assert_array_equal(np.column_stack([v["red"], v["green"], v["blue"]]), point_colors(res))
+    assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    html = paths["html"].read_text()
+    assert html.count('<tr data-segment-id="') == 2 and html.count('<tr data-group-id="') == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.html", "out.ply", "out.png", "part.xyz", "r.json"]
+
+
+@pytest.mark.parametrize("flag", ["--ply", "--png", "--report"])
+def test_view_output_errors(tmp_path, capsys, fake_pipeline, flag):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    (tmp_path / "afile").write_text("x")
+    out = tmp_path / "r.json"
+    cases = [
+        (tmp_path / "missing" / "v.out", ["does not exist"]),
+        (tmp_path, ["is a directory"]),
+        (tmp_path / "afile" / "v.out", ["not a directory"]),
+        (inp, ["overwrite the input"]),
+        (out, [flag, "same file as another output"]),
+    ]
+    for path, words in cases:
+        assert main(["segment", str(inp), "-o", str(out), flag, str(path)]) == 2
+        _assert_one_line_error(capsys, *words)
+    assert fake_pipeline.calls == []  # every check happens before the run
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "part.xyz"]
+
+
+def test_view_writer_oserror_is_one_line(tmp_path, capsys, monkeypatch, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+
+    def deny(path, points, result):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr("houghcad.render.render_png", deny)
+    assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "--png", str(tmp_path / "v.png")]) == 2
+    _assert_one_line_error(capsys, "v.png", "Permission denied")
+    assert not (tmp_path / "v.png").exists()
+
+
+def test_no_merge_reaches_a_pipeline_that_merges(tmp_path, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    seen = []
+
+    def segment(points, normals=None, *, merge: bool = True, **kwargs):
+        seen.append(merge)
+        return _fake_result(len(points))
+
+    fake_pipeline.segment = segment
+    assert main(["segment", str(inp), "-o", str(tmp_path / "a.json"), "-q"]) == 0
+    assert main(["segment", str(inp), "-o", str(tmp_path / "b.json"), "-q", "--no-merge"]) == 0
+    assert seen == [True, False]
+
+
+class _TTY(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def _progress_stub(fake_pipeline):
+    def segment(points, normals=None, progress=None, **kwargs):
+        for stage, frac in (("preprocess", 0.0), ("recognition", 0.1), ("splitting", 0.6), ("done", 1.0)):
+            if progress is not None:
+                progress(stage, frac)
+        return _fake_result(len(points))
+
+    fake_pipeline.segment = segment
+
+
+def test_progress_bar_on_a_terminal_only(tmp_path, monkeypatch, capsys, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    _progress_stub(fake_pipeline)
+    tty = _TTY()
+    monkeypatch.setattr(sys, "stderr", tty)
+    assert main(["segment", str(inp), "-o", str(tmp_path / "a.json")]) == 0
+    drawn = tty.getvalue()
+    assert "splitting" in drawn and "100%" in drawn
+
+    quiet = _TTY()
+    monkeypatch.setattr(sys, "stderr", quiet)
+    assert main(["segment", str(inp), "-o", str(tmp_path / "b.json"), "--quiet"]) == 0
+    assert quiet.getvalue() == ""
+
+    monkeypatch.undo()  # back to pytest's captured (non-TTY) stderr
+    _progress_stub(fake_pipeline)
+    assert main(["segment", str(inp), "-o", str(tmp_path / "c.json")]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_demo_writes_every_view(tmp_path, capsys, monkeypatch, fake_pipeline):
+    data = tmp_path / "pkg" / "data"
+    data.mkdir(parents=True)
+    from houghcad.io import write_points_ply
+
+    write_points_ply(data / "demo_part.ply", _blob(300))
+    monkeypatch.setattr(importlib.resources, "files", lambda pkg: tmp_path / "pkg")
+    assert main(["demo", "-o", str(tmp_path / "d")]) == 0
+    names = sorted(p.name for p in (tmp_path / "d").iterdir())
+    assert names == ["demo_part_report.html", "demo_part_segments.json", "demo_part_segments.ply",
+                     "demo_part_segments.png"]
+    out = capsys.readouterr().out
+    assert all(f"wrote {tmp_path / 'd' / n}" in out for n in names)
+
+
+def test_groups_table():
+    from houghcad.report import groups_table, summary_table
+    from houghcad.result import Group
+
+    res = _fake_result(100)
+    assert groups_table(res) == "" and "kind" not in summary_table(res)
+    res.groups = [Group("parallel", [0, 1], {"normal": [0.0, 0.0, 1.0]}),
+                  Group("translation", list(range(9)), {"offset": [2.0, 0.0, 0.0], "radius": 0.123456})]
+    lines = groups_table(res).splitlines()
+    assert lines[0].split() == ["group", "kind", "members", "shared"]
+    assert lines[2].split()[:2] == ["1", "translation"]  # kinds in GROUP_KINDS order
+    assert "0, 1, 2, 3, 4, 5, ... (+3)" in lines[2] and "radius 0.1235, offset (2, 0, 0)" in lines[2]
+    assert lines[3].split()[:4] == ["0", "parallel", "0,", "1"] and "normal (0, 0, 1)" in lines[3]
+    table = summary_table(res)
+    assert table.index("unsegmented") < table.index("translation") < table.index("time")

@@ -8,6 +8,7 @@ a bug and propagates with its traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib.resources
 import json
 import math
@@ -94,14 +95,24 @@ def build_parser() -> argparse.ArgumentParser:
                    "clouds); 'pca' and 'voting' always estimate them (default: auto)")
     p.add_argument("--fit4cad", metavar="DIR",
                    help="also write DIR/<input stem>_primitives.txt in the Fit4CAD ground-truth format")
-    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument("--ply", metavar="OUT.ply",
+                   help="also write the cloud as a coloured binary PLY with per-point segment, type and group "
+                   "fields (for CloudCompare, MeshLab)")
+    p.add_argument("--png", metavar="OUT.png", help="also draw four views coloured by type and by segment")
+    p.add_argument("--report", metavar="OUT.html",
+                   help="also write a self-contained HTML report: interactive 3-D view, tables, timings")
+    p.add_argument("--no-merge", action="store_true",
+                   help="skip the association step (no groups; segments of one primitive stay apart)")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors (and no progress bar)")
     p.set_defaults(func=_cmd_segment)
 
     p = sub.add_parser("demo", help="segment the example part shipped with the package",
-                       description="Segment the bundled demo part and write DIR/demo_part_segments.json.")
+                       description="Segment the bundled demo part and write DIR/demo_part_segments.json, "
+                       "the coloured cloud DIR/demo_part_segments.ply, the views DIR/demo_part_segments.png "
+                       "and the report DIR/demo_part_report.html.")
     p.add_argument("-o", "--output", metavar="DIR", default=DEMO_DIR_DEFAULT,
                    help=f"output directory (default: ./{DEMO_DIR_DEFAULT})")
-    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors (and no progress bar)")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("evaluate", help="compare a result with Fit4CAD ground truth",
@@ -156,11 +167,70 @@ def _make_dir(directory: Path) -> None:
         raise InputError(f"{directory}: cannot create directory ({exc.strerror or exc})") from None
 
 
-def _run_segmentation(cloud: PointCloud, **options: Any):
-    """Call :func:`houghcad.pipeline.segment` (imported late: it compiles with numba)."""
+def _run_segmentation(cloud: PointCloud, *, quiet: bool = False, merge: bool = True, **options: Any):
+    """Call :func:`houghcad.pipeline.segment` (imported late: it compiles with numba).
+
+    A progress bar goes to stderr unless ``quiet`` or stderr is not a terminal.
+    ``merge`` is passed only to a pipeline that has the association step.
+    """
+    import inspect
+
     from .pipeline import segment
 
-    return segment(cloud.points, cloud.normals, source=cloud.source, **options)
+    if "merge" in inspect.signature(segment).parameters:
+        options["merge"] = merge
+    with _progress_bar(quiet) as progress:
+        return segment(cloud.points, cloud.normals, source=cloud.source, progress=progress, **options)
+
+
+@contextlib.contextmanager
+def _progress_bar(quiet: bool):
+    """Yield a ``progress(stage, fraction)`` callback drawing a tqdm bar on stderr, or None.
+
+    Off when ``quiet`` or when stderr is not a TTY (logs, pipes, CI): a bar
+    there is only noise.  The bar is removed when the run ends.
+    """
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=100, file=sys.stderr, leave=False, dynamic_ncols=True,
+               bar_format="{desc:<12}{percentage:3.0f}%|{bar}| {elapsed}")
+
+    def progress(stage: str, fraction: float) -> None:
+        # The pipeline reports a few dozen times per run: redraw on every call
+        # (tqdm's rate limit would hide short stages).
+        bar.set_description_str(stage, refresh=False)
+        bar.update(max(0, min(100, round(100.0 * float(fraction))) - bar.n))
+        bar.refresh()
+
+    try:
+        yield progress
+    finally:
+        bar.close()
+
+
+def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | None,
+                 report: Path | None) -> list[Path]:
+    """Write the optional coloured PLY, PNG views and HTML report; returns the paths written."""
+    written = []
+    if ply is not None:
+        from .io.writers import write_result_ply
+
+        _write(ply, lambda p, r: write_result_ply(p, cloud.points, r), result)
+        written.append(ply)
+    if png is not None:
+        from .render import render_png
+
+        _write(png, lambda p, r: render_png(p, cloud.points, r), result)
+        written.append(png)
+    if report is not None:
+        from .htmlreport import write_html_report
+
+        _write(report, lambda p, r: write_html_report(p, cloud.points, r), result)
+        written.append(report)
+    return written
 
 
 def _print(text: str, quiet: bool) -> None:
@@ -176,13 +246,25 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     out = Path(args.output) if args.output else Path.cwd() / f"{inp.stem}_segments.json"
     prim = Path(args.fit4cad) / f"{inp.stem}_primitives.txt" if args.fit4cad else None
 
+    views = {flag: Path(getattr(args, flag)) if getattr(args, flag) else None for flag in ("ply", "png", "report")}
+
     cloud = read_points(inp)
     _check_output(out, [inp])
     if prim is not None:
         _check_output(prim, [inp, out], create_parent=True)
+    taken = [out] + ([prim] if prim is not None else [])
+    for flag, path in views.items():
+        if path is None:
+            continue
+        for other in taken:  # two outputs on one path: the second would silently replace the first
+            if _same_file(other, path):
+                raise InputError(f"{path}: --{flag} names the same file as another output")
+        _check_output(path, [inp])
+        taken.append(path)
 
     result = _run_segmentation(
-        cloud, families=args.families, epsilon=args.epsilon, seed=args.seed, normals_method=args.normals
+        cloud, families=args.families, epsilon=args.epsilon, seed=args.seed, normals_method=args.normals,
+        quiet=args.quiet, merge=not args.no_merge,
     )
     _write(out, write_json, result.to_dict())
     written = [out]
@@ -190,6 +272,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
         _make_dir(prim.parent)
         _write(prim, write_fit4cad_primitives, [s.indices for s in result.segments])
         written.append(prim)
+    written += _write_views(cloud, result, views["ply"], views["png"], views["report"])
 
     _print(summary_table(result), args.quiet)
     _print("\n".join(f"wrote {p}" for p in written), args.quiet)
@@ -202,16 +285,20 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         raise InputError(f"{resource}: demo data file is missing from the installed package")
     outdir = Path(args.output)
     out = outdir / "demo_part_segments.json"
-    _check_output(out, [], create_parent=True)
+    ply, png, report = (outdir / name for name in
+                        ("demo_part_segments.ply", "demo_part_segments.png", "demo_part_report.html"))
+    for path in (out, ply, png, report):
+        _check_output(path, [], create_parent=True)
 
     with importlib.resources.as_file(resource) as path:
         cloud = read_points(path)
-    result = _run_segmentation(cloud)
+    result = _run_segmentation(cloud, quiet=args.quiet)
     _make_dir(outdir)
     _write(out, write_json, result.to_dict())
+    written = [out] + _write_views(cloud, result, ply, png, report)
 
     _print(summary_table(result), args.quiet)
-    _print(f"wrote {out}", args.quiet)
+    _print("\n".join(f"wrote {p}" for p in written), args.quiet)
     return 0
 
 

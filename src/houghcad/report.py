@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from .result import Result
+from .result import GROUP_KINDS, Result
 
-__all__ = ["summary_table"]
+__all__ = ["summary_table", "groups_table"]
 
 # Families in the order the paper lists them; unknown types follow alphabetically.
 _FAMILY_ORDER = ("plane", "cylinder", "cone", "sphere", "torus")
@@ -53,12 +53,51 @@ def _timing_lines(timing: dict[str, float]) -> list[str]:
     return lines
 
 
+def _fmt_descriptor(value) -> str:
+    """A shared descriptor in a few characters: 4 significant digits, vectors in parentheses."""
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return "(" + ", ".join(_fmt_descriptor(v) for v in value) + ")"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return str(value)
+    return f"{float(value):.4g}"
+
+
+def _fmt_members(members: list[int], limit: int = 6) -> str:
+    """Segment ids, the first ``limit`` of them and a count of the rest."""
+    shown = ", ".join(str(int(m)) for m in members[:limit])
+    return shown + (f", ... (+{len(members) - limit})" if len(members) > limit else "")
+
+
+def groups_table(result: Result) -> str:
+    """Fixed-width text table of the association groups, empty string when there are none.
+
+    One row per group, by kind (:data:`~houghcad.result.GROUP_KINDS` order)
+    then id: group id, kind, member segment ids, and the shared descriptors
+    (``radius 2.5``, ``axis (0, 0, 1)`` ..., world units, 4 significant digits).
+    """
+    if not result.groups:
+        return ""
+    order = sorted(range(len(result.groups)), key=lambda i: (
+        GROUP_KINDS.index(result.groups[i].kind) if result.groups[i].kind in GROUP_KINDS else len(GROUP_KINDS), i))
+    header = f"{'group':<6}{'kind':<16}{'members':<28}shared"
+    lines = [header, "-" * len(header)]
+    for i in order:
+        g = result.groups[i]
+        # Scalars (radius, angle, count) say most in least room: they go first.
+        items = sorted(g.descriptors.items(), key=lambda kv: isinstance(kv[1], (list, tuple, np.ndarray)))
+        shared = ", ".join(f"{k} {_fmt_descriptor(v)}" for k, v in items)
+        members = _fmt_members(g.members)
+        lines.append(f"{i:<6d}{g.kind:<16}{members:<27} {shared}".rstrip())
+    return "\n".join(lines)
+
+
 def summary_table(result: Result) -> str:
     """Fixed-width text table summarising ``result``.
 
     One row per family present (segments, points, mean and max MFE), a total
     row, the number of unsegmented points (and their share of the cloud) and
-    the wall-clock time, total then per stage.  No trailing newline.
+    the groups (:func:`groups_table`) when there are any, and the wall-clock
+    time, total then per stage.  No trailing newline.
     """
     header = f"{'family':<12}{'segments':>9}{'points':>10}{'mean MFE':>11}{'max MFE':>11}"
     lines = [header, "-" * len(header)]
@@ -70,6 +109,9 @@ def summary_table(result: Result) -> str:
     n_unseg = len(result.unsegmented)
     share = 100.0 * n_unseg / result.n_points if result.n_points else 0.0
     lines.append(f"{'unsegmented':<12}{'':>9}{n_unseg:>10d}  ({share:.1f}% of {result.n_points} points)")
+    if result.groups:
+        lines.append("")
+        lines.append(groups_table(result))
     if result.timing:
         lines.append("")
         lines += _timing_lines(result.timing)
