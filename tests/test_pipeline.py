@@ -245,10 +245,7 @@ def test_block_hole_two_parts_one_cylinder(part_runs):
     assert abs(a.params["radius"] - b.params["radius"]) <= 2 * ACCEPT["radius"] * cloud.diagonal()
 
 
-BLOCK_HOLE_MERGE_FAILURE: str | None = (
-    "no association step (paper §5.4) yet: the two pieces are two cylinder segments (194 and 258 of "
-    "their 209 and 266 points, axes 0.37° and 0.57° off, radii within 0.01% of the diagonal); "
-    "the hole's DSC is 0.70")
+BLOCK_HOLE_MERGE_FAILURE: str | None = None  # the association step merges the two pieces
 
 
 @pytest.mark.xfail(BLOCK_HOLE_MERGE_FAILURE is not None, strict=False, reason=BLOCK_HOLE_MERGE_FAILURE or "")

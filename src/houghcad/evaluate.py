@@ -455,7 +455,9 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path) 
         if idx.size and (idx.min() < 0 or idx.max() >= n):
             bad = int(idx.min()) if idx.min() < 0 else int(idx.max())
             raise InputError(f"{rpath}: segment {s.id} index {bad} out of range [0, {n})")
-    measures = classification_measures([s.indices for s in result.segments], gt, n)
+    # Fit4CAD's ground truth has one segment per CAD face: a maximal primitive
+    # is scored by its connected parts.
+    measures = classification_measures(result.faces(), gt, n)
     return {
         "measures": {k: measures[k] for k in MEASURES},
         "mfe": mfe_stats(result),

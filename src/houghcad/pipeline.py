@@ -9,10 +9,11 @@ from typing import Any, Callable
 import numpy as np
 
 from . import families as fam_mod
+from .associate import Associator, Item, extent
 from .errors import InputError
 from .preprocess import preprocess
 from .recognize import Candidate, Context, mean_fitting_error, recognize
-from .result import Result, Segment
+from .result import GROUP_KINDS, Group, Part, Result, Segment
 from .split import absorb, accept, splitting_phase
 
 
@@ -37,6 +38,12 @@ class Segmenter:
         Seed of every random choice.
     progress : callable, optional
         Called as ``progress(stage: str, fraction: float)``.
+    merge : bool
+        Merge segments lying on one surface into maximal primitives (their
+        connected pieces are kept as ``parts``). Groups are found either way.
+    association : dict, optional
+        Options of :class:`houghcad.associate.Associator` (``angle_tol``,
+        ``length_tol``, ``relative_tol``, ``extent_tol``).
 
     Attributes
     ----------
@@ -46,7 +53,8 @@ class Segmenter:
 
     def __init__(self, families="simple", epsilon: float | None = None, normals_method: str = "auto",
                  persistence: float = 0.1, min_points: int | None = None, seed: int = 0,
-                 progress: Callable[[str, float], None] | None = None):
+                 progress: Callable[[str, float], None] | None = None, merge: bool = True,
+                 association: dict[str, Any] | None = None):
         self.families = families
         self.epsilon = epsilon
         self.normals_method = normals_method
@@ -54,11 +62,14 @@ class Segmenter:
         self.min_points = min_points
         self.seed = seed
         self.progress = progress
+        self.merge = merge
+        self.association = association
 
     def get_options(self) -> dict[str, Any]:
         return {"families": self.families if isinstance(self.families, str) else list(self.families),
                 "epsilon": self.epsilon, "normals_method": self.normals_method,
-                "persistence": self.persistence, "min_points": self.min_points, "seed": self.seed}
+                "persistence": self.persistence, "min_points": self.min_points, "seed": self.seed,
+                "merge": bool(self.merge), "association": dict(self.association or {})}
 
     def fit(self, points: np.ndarray, normals: np.ndarray | None = None, source: str | None = None) -> "Segmenter":
         """Segment ``points`` (n, 3), world units; ``normals`` (n, 3) optional."""
@@ -73,6 +84,10 @@ class Segmenter:
             raise InputError(f"epsilon must be a fraction of the diagonal in (0, 0.5), got {self.epsilon}")
         if not (0 < float(self.persistence) < 1):
             raise InputError(f"persistence must be in (0, 1), got {self.persistence}")
+        try:
+            associator = Associator(merge=bool(self.merge), **(self.association or {}))
+        except TypeError as exc:
+            raise InputError(f"association options: {exc}") from None
         fams = fam_mod.select(self.families)
         timing: dict[str, float] = {}
         report = self.progress or (lambda stage, frac: None)
@@ -109,19 +124,43 @@ class Segmenter:
         absorb(segments, free, ctx)
         timing["splitting"] = time.perf_counter() - t2
 
+        self._recognised = (segments, pre, ctx, points, source, dict(timing), t0)
+        self.result_ = self._associate(associator, report)
+        report("done", 1.0)
+        return self
+
+    def reassociate(self, merge: bool | None = None, association: dict[str, Any] | None = None) -> Result:
+        """Run the association step again on the segments of the last :meth:`fit`
+        with other options (cheap: recognition is not repeated); returns a new Result."""
+        if not hasattr(self, "_recognised"):
+            raise RuntimeError("call fit() first")
+        merge = self.merge if merge is None else merge
+        try:
+            associator = Associator(merge=bool(merge), **(association if association is not None
+                                                          else (self.association or {})))
+        except TypeError as exc:
+            raise InputError(f"association options: {exc}") from None
+        return self._associate(associator, lambda stage, frac: None)
+
+    def _associate(self, associator: Associator, report) -> Result:
+        segments, pre, ctx, points, source, timing, t0 = self._recognised
+        timing = dict(timing)
         t3 = time.perf_counter()
-        report("output", 0.95)
-        out = self._output(segments, pre, points)
-        timing["output"] = time.perf_counter() - t3
-        timing["total"] = time.perf_counter() - t0
+        report("association", 0.92)
+        associator.fit(segments, pre, ctx.tau, ctx.link)
+        timing["association"] = time.perf_counter() - t3
+
+        t4 = time.perf_counter()
+        report("output", 0.96)
+        out, groups = self._output(associator.items_, associator.groups_, pre, points)
+        timing["output"] = time.perf_counter() - t4
+        timing["total"] = sum(v for k, v in timing.items() if k != "total")
         assigned = np.zeros(len(points), bool)
         for s in out:
             assigned[s.indices] = True
-        self.result_ = Result(n_points=len(points), segments=out, unsegmented=np.flatnonzero(~assigned),
-                              timing=timing, options={**self.get_options(), "normals_used": pre.normals_method},
-                              source=source)
-        report("done", 1.0)
-        return self
+        options = {**self.get_options(), "merge": bool(associator.merge), "normals_used": pre.normals_method}
+        return Result(n_points=len(points), segments=out, unsegmented=np.flatnonzero(~assigned),
+                      timing=timing, options=options, source=source, groups=groups)
 
     def _context(self, pre, n: int) -> Context:
         s = pre.spacing
@@ -137,31 +176,73 @@ class Segmenter:
                        min_points=int(mp), max_radius=1.0, persistence=float(self.persistence),
                        min_votes=float(mp), seed=int(self.seed))
 
-    def _output(self, segments: list[Candidate], pre, points: np.ndarray) -> list[Segment]:
-        """Refit every segment on its own points and map it to world coordinates."""
-        rng = np.random.default_rng(self.seed)
+    def _output(self, items: list[Item], raw_groups, pre, points: np.ndarray) -> tuple[list[Segment], list[Group]]:
+        """Refit every segment (and part) on its own points, map it to world
+        coordinates, and renumber the groups' members."""
         T = pre.transform
-        out: list[Segment] = []
-        segments = sorted(segments, key=lambda c: (-len(c.indices), int(c.indices[0])))
+        order = sorted(range(len(items)), key=lambda k: (-len(items[k].indices), int(items[k].indices[0])))
+        new_id = {k: i for i, k in enumerate(order)}
         # Final refits may reach any radius below 1e9 (standard units).
         check = Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0, max_radius=1e9)
-        for c in segments:
-            P, N = pre.points[c.indices], pre.normals[c.indices]
+        rng = np.random.default_rng(self.seed)
+
+        def fitted(fam, prim0, idx):
+            P, N = pre.points[idx], pre.normals[idx]
             sel = np.arange(len(P)) if len(P) <= 4000 else np.sort(rng.choice(len(P), 4000, replace=False))
-            prim = c.family.fit(c.prim, P[sel], N[sel])
-            if prim is None or not c.family.valid(prim, check):
-                prim = c.prim
-            d = c.family.distance(prim, P) / T.scale
-            mfe = mean_fitting_error(d, points[c.indices])
-            out.append(Segment(id=len(out), type=c.family.name, indices=np.sort(c.indices).astype(np.int64),
-                               params=c.family.to_world(prim, T), mfe=mfe))
-        return out
+            prim = fam.fit(prim0, P[sel], N[sel])
+            if prim is None or not fam.valid(prim, check):
+                prim = prim0
+            mfe = mean_fitting_error(fam.distance(prim, P) / T.scale, points[idx])
+            return fam.to_world(prim, T), mfe
+
+        out: list[Segment] = []
+        for k in order:
+            it = items[k]
+            params, mfe = fitted(it.family, it.prim, it.indices)
+            parts = []
+            if len(it.parts) > 1:
+                for p in sorted(it.parts, key=lambda a: (-len(a), int(a[0]))):
+                    pp, pm = fitted(it.family, it.prim, p)
+                    parts.append(Part(indices=p.astype(np.int64), params=pp, mfe=pm))
+            desc = _world_descriptors(it.family, it.family.descriptors(it.prim), T)
+            frame = it.family.frame(it.prim)
+            axis = T.inv_dirs(frame.direction) if frame is not None and frame.direction is not None else None
+            desc["extent"] = extent(points[it.indices], axis).tolist()
+            out.append(Segment(id=len(out), type=it.family.name, indices=it.indices.astype(np.int64),
+                               params=params, mfe=mfe, parts=parts, descriptors=desc))
+        groups = []
+        for g in raw_groups:
+            fam = items[g.members[0]].family
+            groups.append(Group(kind=g.kind, members=sorted(new_id[m] for m in g.members),
+                                descriptors=_world_descriptors(fam, g.descriptors, T)))
+        groups.sort(key=lambda g: (GROUP_KINDS.index(g.kind), g.members))
+        return out, groups
+
+
+
+
+
+def _world_descriptors(fam, d: dict[str, Any], T) -> dict[str, Any]:
+    """Descriptors from the standard frame to world units and axes."""
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        if k in fam.length_descriptors or k == "extent":
+            out[k] = (np.asarray(v, float) / T.scale).tolist() if np.ndim(v) else T.inv_length(v)
+        elif k in ("axis", "normal", "mirror_normal"):
+            out[k] = T.inv_dirs(np.asarray(v, float)).tolist()
+        elif k in ("axis_point", "mirror_point"):
+            out[k] = T.inv_points(np.asarray(v, float)).tolist()
+        elif isinstance(v, (np.floating, np.integer)):
+            out[k] = v.item()
+        else:
+            out[k] = v
+    return out
 
 
 def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="simple",
             epsilon: float | None = None, seed: int = 0, normals_method: str = "auto",
             progress: Callable[[str, float], None] | None = None, source: str | None = None,
-            **options) -> Result:
+            merge: bool = True, **options) -> Result:
     """Decompose a point cloud into primitives.
 
     Parameters
@@ -169,8 +250,8 @@ def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="
     points : ndarray, shape (n, 3)
         World coordinates.
     normals : ndarray, shape (n, 3), optional
-    families, epsilon, seed, normals_method, progress
-        See :class:`Segmenter`.
+    families, epsilon, seed, normals_method, progress, merge
+        See :class:`Segmenter` (``**options`` too: persistence, min_points, association).
     source : str, optional
         Name of the input, used in messages and in the result.
 
@@ -179,5 +260,5 @@ def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="
     Result
     """
     seg = Segmenter(families=families, epsilon=epsilon, seed=seed, normals_method=normals_method,
-                    progress=progress, **options)
+                    progress=progress, merge=merge, **options)
     return seg.fit(points, normals, source=source).result_

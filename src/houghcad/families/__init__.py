@@ -7,7 +7,7 @@ it with :func:`register`, and is imported here.
 from __future__ import annotations
 
 from ..errors import InputError
-from .base import REGISTRY, Family, Placement, Primitive, register
+from .base import REGISTRY, Family, Frame, Placement, Primitive, register
 from . import plane, cylinder, sphere, cone, torus  # noqa: F401  (registration)
 
 SIMPLE = ("plane", "cylinder", "cone", "sphere", "torus")

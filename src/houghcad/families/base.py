@@ -59,6 +59,23 @@ class Primitive:
                                        for k, v in self.params.items()})
 
 
+@dataclass
+class Frame:
+    """Where a primitive sits, for the association step (paper §5.4).
+
+    ``kind`` says what ``anchor`` pins down: ``"plane"`` (a point of the
+    plane, ``direction`` its normal), ``"line"`` (a point of the axis line,
+    ``direction`` the axis) or ``"point"`` (a distinguished point: centre,
+    apex; ``direction`` the axis when there is one). ``oriented`` tells
+    whether the sign of ``direction`` is significant (a cone's opening).
+    """
+
+    kind: str
+    anchor: np.ndarray
+    direction: np.ndarray | None = None
+    oriented: bool = False
+
+
 class Family:
     """Base class of primitive families (see module docstring)."""
 
@@ -117,6 +134,16 @@ class Family:
     def descriptors(self, prim: Primitive) -> dict[str, float]:
         """Position-independent descriptors (standard units)."""
         return {}
+
+    #: Descriptors that are lengths (scaled to world units on output); the
+    #: others are angles (radians) unless listed as integers.
+    length_descriptors: ClassVar[tuple[str, ...]] = ()
+    #: Descriptors that are integers (equal or not at all).
+    integer_descriptors: ClassVar[tuple[str, ...]] = ()
+
+    def frame(self, prim: Primitive) -> Frame | None:
+        """Placement descriptors: axis line, centre, normal, apex (standard frame)."""
+        return None
 
 
 REGISTRY: dict[str, Family] = {}

@@ -8,7 +8,7 @@ from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import (Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, radial,
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, radial,
                    register, tangent_basis, unit)
 
 
@@ -119,3 +119,6 @@ class Cone(Family):
 
     def descriptors(self, prim):
         return {"half_angle": float(prim.params["half_angle"])}
+
+    def frame(self, prim):
+        return Frame("point", np.asarray(prim.params["apex"], float), unit(prim.params["axis"]), oriented=True)

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..hough import Grid, direction_accumulator, normal_line_peaks, refine_direction
 from ..preprocess import rotation_to_z
-from .base import Family, Placement, Primitive, gauss_newton, radial, register, tangent_basis, unit
+from .base import Frame, Family, Placement, Primitive, gauss_newton, radial, register, tangent_basis, unit
 
 
 def axis_candidates(P, N, ctx, max_dirs):
@@ -138,5 +138,10 @@ class Cylinder(Family):
                 "axis": unit(T.inv_dirs(prim.params["axis"])).tolist(),
                 "radius": T.inv_length(prim.params["radius"])}
 
+    length_descriptors = ("radius",)
+
     def descriptors(self, prim):
         return {"radius": float(prim.params["radius"])}
+
+    def frame(self, prim):
+        return Frame("line", np.asarray(prim.params["axis_point"], float), unit(prim.params["axis"]))

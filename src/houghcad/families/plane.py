@@ -6,7 +6,7 @@ import numpy as np
 
 from ..hough import Grid, direction_accumulator, refine_direction
 from ..preprocess import rotation_to_z
-from .base import Family, Placement, Primitive, register, unit
+from .base import Frame, Family, Placement, Primitive, register, unit
 
 
 @register
@@ -72,3 +72,7 @@ class Plane(Family):
 
     def descriptors(self, prim):
         return {}
+
+    def frame(self, prim):
+        n = prim.params["normal"]
+        return Frame("plane", n * prim.params["offset"], n)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..hough import Grid, normal_line_peaks
-from .base import Family, Placement, Primitive, gauss_newton, lines_intersection, register, unit
+from .base import Frame, Family, Placement, Primitive, gauss_newton, lines_intersection, register, unit
 
 
 def center_votes(P, N, ctx, max_centers):
@@ -76,5 +76,10 @@ class Sphere(Family):
         return {"center": T.inv_points(prim.params["center"]).tolist(),
                 "radius": T.inv_length(prim.params["radius"])}
 
+    length_descriptors = ("radius",)
+
     def descriptors(self, prim):
         return {"radius": float(prim.params["radius"])}
+
+    def frame(self, prim):
+        return Frame("point", np.asarray(prim.params["center"], float))

@@ -8,7 +8,7 @@ from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
+from .base import Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
 
 
 def torus_frame(P, N):
@@ -99,6 +99,11 @@ class Torus(Family):
                 "major_radius": T.inv_length(prim.params["major_radius"]),
                 "minor_radius": T.inv_length(prim.params["minor_radius"])}
 
+    length_descriptors = ("major_radius", "minor_radius")
+
     def descriptors(self, prim):
         return {"major_radius": float(prim.params["major_radius"]),
                 "minor_radius": float(prim.params["minor_radius"])}
+
+    def frame(self, prim):
+        return Frame("point", np.asarray(prim.params["center"], float), unit(prim.params["axis"]))

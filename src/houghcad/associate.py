@@ -1,0 +1,494 @@
+"""Segment association (paper §5.4): maximal primitives, patterns and relations.
+
+After recognition, each segment gets
+
+- *shape* descriptors, independent of its position: the family's own
+  (radius, half-angle, radii ...) and the segment's extent (its sorted
+  principal ranges);
+- a *placement* (:class:`houghcad.families.base.Frame`): normal and offset,
+  axis line, centre or apex.
+
+Complete-linkage hierarchical clustering (scipy) on these finds
+
+- ``same_primitive``: segments lying on one surface, adjacent or not. A
+  merge is accepted only if one primitive refitted on the union explains
+  every member as well as its own fit did (within half the inlier
+  threshold), so tolerances on the parameters only propose;
+- ``translation``: equal shape descriptors, parallel axes or normals;
+- ``reflection``: equal shape, two axis directions that a plane mirror
+  exchanges, with the placements mirrored too;
+- ``rotation``: equal shape, several axis directions otherwise;
+- ``coaxial``: one axis line; ``parallel``: parallel axes or normals (not
+  already a coaxial or translation group).
+
+Complete linkage keeps every pair of a group within the tolerances (no
+chaining), which is why the paper uses it.
+
+Everything runs in the cloud's standard frame (unit cube); tolerances are
+fractions of its diagonal, so they are relative to the model's size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.cluster.hierarchy import fcluster, linkage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from .families.base import Family, Frame, Primitive, unit
+from .recognize import Candidate
+
+__all__ = ["Associator", "Item", "RawGroup", "extent", "pivot"]
+
+_MAX_FIT = 4000  # points per refit: beyond this the parameters no longer move
+
+
+@dataclass
+class Item:
+    """A (possibly merged) segment in the standard frame.
+
+    ``parts`` are its connected pieces (index arrays into the cloud); ``members``
+    the positions of the raw segments it was made from.
+    """
+
+    family: Family
+    prim: Primitive
+    indices: np.ndarray
+    parts: list[np.ndarray]
+    members: list[int]
+
+
+@dataclass
+class RawGroup:
+    """A group over item positions, with shared descriptors (standard units)."""
+
+    kind: str
+    members: list[int]
+    descriptors: dict = field(default_factory=dict)
+
+
+def extent(P: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
+    """Size of a segment, shape (3,), P's units (P: (n, 3)).
+
+    Without ``direction``: the sorted principal ranges. With the segment's axis
+    or normal: the range along it, then the sorted principal ranges across it
+    (PCA alone mixes the axis and a diameter when they are of similar length).
+    Each range spans the central 95 % of the points, so a few edge points a
+    segment took from its neighbour do not change it. Invariant under rigid
+    motions: equal features have equal extents.
+    """
+    if len(P) < 2:
+        return np.zeros(3)
+    Q = P - P.mean(axis=0)
+    Qs = Q[:: max(1, len(Q) // 2000)]
+    if direction is None:
+        _, _, vt = np.linalg.svd(Qs, full_matrices=False)
+        lo, hi = np.percentile(Qs @ vt.T, [2.5, 97.5], axis=0)
+        return np.sort(hi - lo)[::-1]
+    a = unit(np.asarray(direction, float))
+    h = Qs @ a
+    across = Qs - np.outer(h, a)
+    _, _, vt = np.linalg.svd(across, full_matrices=False)
+    lo, hi = np.percentile(across @ vt[:2].T, [2.5, 97.5], axis=0)
+    h_lo, h_hi = np.percentile(h, [2.5, 97.5])
+    return np.concatenate([[h_hi - h_lo], np.sort(hi - lo)[::-1]])
+
+
+def pivot(frame: Frame, P: np.ndarray) -> np.ndarray:
+    """A distinguished point of a placed segment, shape (3,): the centre or apex;
+    on an axis line, the foot of the points' centroid; on a plane, the centroid."""
+    c = P.mean(axis=0)
+    if frame.kind == "line":
+        a = frame.direction
+        return frame.anchor + ((c - frame.anchor) @ a) * a
+    if frame.kind == "plane":
+        return c
+    return np.asarray(frame.anchor, float)
+
+
+def _angle(a: np.ndarray, b: np.ndarray, oriented: bool) -> float:
+    """Angle between two unit directions, radians; sign ignored unless oriented."""
+    c = float(a @ b)
+    if not oriented:
+        c = abs(c)
+    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def _line_distance(p: np.ndarray, a: np.ndarray, q: np.ndarray, b: np.ndarray) -> float:
+    """Symmetric distance between lines (p, a) and (q, b) measured at their anchors."""
+    d1 = np.linalg.norm(np.cross(q - p, a))
+    d2 = np.linalg.norm(np.cross(p - q, b))
+    return float(max(d1, d2))
+
+
+def _complete_linkage(D: np.ndarray) -> np.ndarray:
+    """Cluster labels (n,) of complete linkage cut at distance 1 on a normalised
+    dissimilarity matrix D (n, n)."""
+    n = len(D)
+    if n == 1:
+        return np.zeros(1, dtype=np.int64)
+    D = np.minimum(np.nan_to_num(D, nan=1e9, posinf=1e9), 1e9)
+    iu = np.triu_indices(n, 1)
+    Z = linkage(D[iu], method="complete")
+    return fcluster(Z, t=1.0, criterion="distance").astype(np.int64) - 1
+
+
+def _clusters(D: np.ndarray, keep: np.ndarray | None = None) -> list[list[int]]:
+    """Clusters of two or more among rows of D (complete linkage, cut at 1)."""
+    lab = _complete_linkage(D)
+    out = []
+    for k in np.unique(lab):
+        m = np.flatnonzero(lab == k)
+        if len(m) >= 2:
+            out.append([int(i) for i in m])
+    return out
+
+
+class Associator:
+    """Find maximal primitives and relations between segments (paper §5.4).
+
+    Parameters
+    ----------
+    merge : bool
+        Merge segments of one primitive into a maximal primitive. Without it
+        the raw segments stay and ``same_primitive`` groups list them.
+    angle_tol : float
+        Largest angle between parallel axes or normals, and between equal
+        half-angles, degrees.
+    length_tol : float, optional
+        Largest difference between equal lengths (radii, offsets, axis
+        distances), a fraction of the cloud's diagonal. Default: from the
+        inlier threshold, at least 0.2 % of the diagonal.
+    relative_tol : float
+        Lengths may also differ by this fraction of their value.
+    extent_tol : float
+        Extents are equal within this fraction of their value (and at least
+        2 % of the diagonal): they come from the points, not from a fit.
+
+    Attributes (after :meth:`fit`)
+    ----------
+    items_ : list of Item
+    groups_ : list of RawGroup
+    """
+
+    def __init__(self, merge: bool = True, angle_tol: float = 2.0, length_tol: float | None = None,
+                 relative_tol: float = 0.02, extent_tol: float = 0.1):
+        self.merge = merge
+        self.angle_tol = angle_tol
+        self.length_tol = length_tol
+        self.relative_tol = relative_tol
+        self.extent_tol = extent_tol
+
+    # ------------------------------------------------------------------ entry point
+    def fit(self, cands: list[Candidate], pre, tau: float, link: float) -> "Associator":
+        """Associate segments ``cands`` (standard frame) of the preprocessed cloud ``pre``.
+
+        ``tau`` is the inlier threshold and ``link`` the neighbour distance of the
+        run, standard units.
+        """
+        self._pre, self._tau = pre, float(tau)
+        diag = float(pre.diagonal)
+        self._L = (self.length_tol * diag if self.length_tol is not None
+                   else max(0.002 * diag, 0.5 * self._tau))
+        self._A = np.radians(self.angle_tol)
+        self._E = 0.02 * diag
+        # Parts are compared by their final least-squares fits: the recognition
+        # fits of small segments can be a degree or two off.
+        cands = [Candidate(c.family, self._refit(c.family, c.prim, np.sort(c.indices)), c.indices, c.mfe)
+                 for c in cands]
+        self._own = [self._mean_residual(c.family, c.prim, c.indices) for c in cands]
+        adjacency = self._adjacency(cands, link)
+        surfaces = self._surfaces(cands)
+
+        items: list[Item] = []
+        same: list[list[int]] = []  # per surface, the raw members
+        for members in surfaces:
+            parts_of = self._parts(members, adjacency)
+            if len(members) == 1:
+                c = cands[members[0]]
+                items.append(Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], members))
+                continue
+            same.append(members)
+            idx = np.sort(np.concatenate([cands[m].indices for m in members]))
+            prim = self._refit(cands[members[0]].family, cands[members[0]].prim, idx)
+            parts = [np.sort(np.concatenate([cands[m].indices for m in p])) for p in parts_of]
+            items.append(Item(cands[members[0]].family, prim, idx, parts, members))
+
+        groups = self._relations(items)
+        if self.merge:
+            for i, it in enumerate(items):
+                if len(it.parts) > 1:
+                    groups.insert(0, RawGroup("same_primitive", [i], {"parts": len(it.parts)}))
+            self.items_ = items
+        else:
+            # Raw segments stay; groups over maximal items expand to their members.
+            raw = [Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], [k])
+                   for k, c in enumerate(cands)]
+            expanded = [RawGroup(g.kind, sorted(m for i in g.members for m in items[i].members), g.descriptors)
+                        for g in groups]
+            groups = [RawGroup("same_primitive", sorted(m), {"parts": len(self._parts(m, adjacency))})
+                      for m in same] + expanded
+            self.items_ = raw
+        self.groups_ = groups
+        return self
+
+    # ------------------------------------------------------------------ geometry helpers
+    def _mean_residual(self, fam: Family, prim: Primitive, idx: np.ndarray) -> float:
+        return float(np.mean(fam.distance(prim, self._pre.points[idx]))) if len(idx) else 0.0
+
+    def _refit(self, fam: Family, prim: Primitive, idx: np.ndarray) -> Primitive:
+        """Least-squares fit on (a deterministic subsample of) the points idx."""
+        sel = idx if len(idx) <= _MAX_FIT else idx[np.linspace(0, len(idx) - 1, _MAX_FIT).astype(np.int64)]
+        try:
+            out = fam.fit(prim, self._pre.points[sel], self._pre.normals[sel])
+        except (np.linalg.LinAlgError, ValueError):
+            out = None
+        return out if out is not None else prim
+
+    def _adjacency(self, cands: list[Candidate], link: float) -> set[tuple[int, int]]:
+        """Pairs (i < j) of segments with points closer than ``link``."""
+        if len(cands) < 2:
+            return set()
+        idx = np.concatenate([c.indices for c in cands])
+        lab = np.repeat(np.arange(len(cands)), [len(c.indices) for c in cands])
+        pairs = cKDTree(self._pre.points[idx]).query_pairs(link, output_type="ndarray")
+        a, b = lab[pairs[:, 0]], lab[pairs[:, 1]]
+        diff = a != b
+        lo, hi = np.minimum(a[diff], b[diff]), np.maximum(a[diff], b[diff])
+        return set(zip(lo.tolist(), hi.tolist()))
+
+    def _parts(self, members: list[int], adjacency: set[tuple[int, int]]) -> list[list[int]]:
+        """Connected components of members under adjacency (lists of members)."""
+        n = len(members)
+        pos = {m: i for i, m in enumerate(members)}
+        e = [(pos[a], pos[b]) for a, b in adjacency if a in pos and b in pos]
+        if not e:
+            return [[m] for m in members]
+        r, c = np.array(e).T
+        G = coo_matrix((np.ones(len(r)), (r, c)), shape=(n, n))
+        k, lab = connected_components(G, directed=False)
+        return [[members[i] for i in np.flatnonzero(lab == j)] for j in range(k)]
+
+    # ------------------------------------------------------------------ same primitive
+    def _shape(self, fam: Family, prim: Primitive) -> dict[str, float]:
+        return {k: float(v) for k, v in fam.descriptors(prim).items()}
+
+    def _tol(self, fam: Family, key: str, a: float, b: float, L: float, A: float) -> float:
+        """Tolerance on a shape descriptor: lengths L plus a relative part, angles A,
+        integers exact."""
+        if key in fam.length_descriptors:
+            return L + self.relative_tol * max(abs(a), abs(b))
+        if key in fam.integer_descriptors:
+            return 0.5
+        return A
+
+    def _param_distance(self, fam: Family, p: Primitive, q: Primitive, L: float, A: float) -> float:
+        """Normalised dissimilarity of two primitives of one family (≤ 1: may be one surface)."""
+        d = 0.0
+        dp, dq = self._shape(fam, p), self._shape(fam, q)
+        for k in dp:
+            d = max(d, abs(dp[k] - dq[k]) / self._tol(fam, k, dp[k], dq[k], L, A))
+        f, g = fam.frame(p), fam.frame(q)
+        if f is None or g is None:
+            return d
+        if f.direction is not None and g.direction is not None:
+            d = max(d, _angle(f.direction, g.direction, f.oriented) / A)
+        if f.kind == "plane":
+            d = max(d, abs(float(f.direction @ (g.anchor - f.anchor))) / L)
+        elif f.kind == "line":
+            d = max(d, _line_distance(f.anchor, f.direction, g.anchor, g.direction) / L)
+        else:
+            d = max(d, float(np.linalg.norm(f.anchor - g.anchor)) / L)
+        return d
+
+    def _surfaces(self, cands: list[Candidate]) -> list[list[int]]:
+        """Partition of the segments into sets lying on one surface."""
+        out: list[list[int]] = []
+        by_family: dict[str, list[int]] = {}
+        for k, c in enumerate(cands):
+            by_family.setdefault(c.family.name, []).append(k)
+        # Proposals are generous (a part's own fit may be loose); the union refit decides.
+        Lp, Ap = 4.0 * self._L, 3.0 * self._A
+        for name, ks in by_family.items():
+            if len(ks) == 1:
+                out.append(ks)
+                continue
+            fam = cands[ks[0]].family
+            D = np.zeros((len(ks), len(ks)))
+            for i in range(len(ks)):
+                for j in range(i + 1, len(ks)):
+                    D[i, j] = D[j, i] = self._param_distance(fam, cands[ks[i]].prim, cands[ks[j]].prim, Lp, Ap)
+            lab = _complete_linkage(D)
+            for k in np.unique(lab):
+                grp = sorted((ks[i] for i in np.flatnonzero(lab == k)), key=lambda m: -len(cands[m].indices))
+                out.extend(self._verify(cands, grp))
+        return sorted(out, key=lambda m: m[0])
+
+    def _verify(self, cands: list[Candidate], grp: list[int]) -> list[list[int]]:
+        """Split a proposed surface into sets that one refitted primitive explains:
+        greedily from the largest, a member joins when the union's fit keeps every
+        member within its own residual plus τ/2."""
+        rest = list(grp)
+        out = []
+        while rest:
+            acc = [rest.pop(0)]
+            fam = cands[acc[0]].family
+            for m in list(rest):
+                trial = acc + [m]
+                idx = np.concatenate([cands[t].indices for t in trial])
+                prim = self._refit(fam, cands[acc[0]].prim, idx)
+                if all(self._mean_residual(fam, prim, cands[t].indices) <= self._own[t] + 0.5 * self._tau
+                       for t in trial):
+                    acc.append(m)
+                    rest.remove(m)
+            out.append(sorted(acc))
+        return out
+
+    # ------------------------------------------------------------------ relations
+    def _relations(self, items: list[Item]) -> list[RawGroup]:
+        pts = self._pre.points
+        frames = [it.family.frame(it.prim) for it in items]
+        shapes = [self._shape(it.family, it.prim) for it in items]
+        ext = [extent(pts[it.indices], f.direction if f is not None else None) for f, it in zip(frames, items)]
+        piv = [pivot(f, pts[it.indices]) if f is not None else pts[it.indices].mean(axis=0)
+               for f, it in zip(frames, items)]
+        # An axis fitted on a piece of length h is known to about (length
+        # tolerance) / h radians: short holes get a looser angle tolerance.
+        span = [e[0] if f is not None and f.kind != "plane" else e[2] for f, e in zip(frames, ext)]
+        unc = [np.arctan2(2.0 * self._L, max(h, 1e-12)) for h in span]
+        self._atol = lambda i, j: self._A + max(unc[i], unc[j])
+        groups: list[RawGroup] = []
+
+        # Congruent segments: one family, equal shape descriptors and extents.
+        by_family: dict[str, list[int]] = {}
+        for i, it in enumerate(items):
+            by_family.setdefault(it.family.name, []).append(i)
+        for name, ks in by_family.items():
+            if len(ks) < 2:
+                continue
+            fam = items[ks[0]].family
+            n = len(ks)
+            D = np.zeros((n, n))
+            for a in range(n):
+                for b in range(a + 1, n):
+                    i, j = ks[a], ks[b]
+                    d = 0.0
+                    for k in shapes[i]:
+                        tol = self._tol(fam, k, shapes[i][k], shapes[j][k], self._L, self._A)
+                        d = max(d, abs(shapes[i][k] - shapes[j][k]) / tol)
+                    tol_e = np.maximum(self._E, self.extent_tol * np.maximum(ext[i], ext[j]))
+                    d = max(d, float(np.max(np.abs(ext[i] - ext[j]) / tol_e)))
+                    D[a, b] = D[b, a] = d
+            for cl in _clusters(D):
+                members = [ks[a] for a in cl]
+                groups.extend(self._congruent(items, members, frames, shapes, ext, piv))
+
+        translation_sets = {frozenset(g.members) for g in groups if g.kind == "translation"}
+
+        # Coaxial: one axis line (cylinders, cones, tori ...).
+        axial = [i for i, f in enumerate(frames) if f is not None and f.kind in ("line", "point")
+                 and f.direction is not None]
+        coaxial_sets = set()
+        if len(axial) >= 2:
+            D = np.zeros((len(axial), len(axial)))
+            for a in range(len(axial)):
+                for b in range(a + 1, len(axial)):
+                    f, g = frames[axial[a]], frames[axial[b]]
+                    d = max(_angle(f.direction, g.direction, False) / self._atol(axial[a], axial[b]),
+                            _line_distance(f.anchor, f.direction, g.anchor, g.direction) / (2.0 * self._L))
+                    D[a, b] = D[b, a] = d
+            for cl in _clusters(D):
+                members = sorted(axial[a] for a in cl)
+                coaxial_sets.add(frozenset(members))
+                f = frames[members[0]]
+                groups.append(RawGroup("coaxial", members, {"axis": f.direction, "axis_point": piv[members[0]]}))
+
+        # Parallel: planes by their normals, axial segments by their axes.
+        for kinds in (("plane",), ("line", "point")):
+            ks = [i for i, f in enumerate(frames) if f is not None and f.kind in kinds and f.direction is not None]
+            if len(ks) < 2:
+                continue
+            D = np.zeros((len(ks), len(ks)))
+            for a in range(len(ks)):
+                for b in range(a + 1, len(ks)):
+                    D[a, b] = D[b, a] = (_angle(frames[ks[a]].direction, frames[ks[b]].direction, False)
+                                         / self._atol(ks[a], ks[b]))
+            for cl in _clusters(D):
+                members = sorted(ks[a] for a in cl)
+                if frozenset(members) in coaxial_sets or frozenset(members) in translation_sets:
+                    continue
+                key = "normal" if kinds == ("plane",) else "axis"
+                groups.append(RawGroup("parallel", members, {key: _mean_direction([frames[m] for m in members])}))
+        return groups
+
+    def _congruent(self, items, members, frames, shapes, ext, piv) -> list[RawGroup]:
+        """Translation / rotation / reflection groups among congruent segments."""
+        shared = {k: float(np.mean([shapes[m][k] for m in members])) for k in shapes[members[0]]}
+        shared["extent"] = np.mean([ext[m] for m in members], axis=0)
+        shared["type"] = items[members[0]].family.name
+        f0 = frames[members[0]]
+        if f0 is None or f0.direction is None:
+            return [RawGroup("translation", sorted(members), shared)]
+        oriented = f0.oriented
+        n = len(members)
+        D = np.zeros((n, n))
+        for a in range(n):
+            for b in range(a + 1, n):
+                D[a, b] = D[b, a] = _angle(frames[members[a]].direction, frames[members[b]].direction,
+                                           oriented) / self._atol(members[a], members[b])
+        lab = _complete_linkage(D)
+        subs = [[members[i] for i in np.flatnonzero(lab == k)] for k in np.unique(lab)]
+        out = []
+        for s in subs:
+            if len(s) >= 2:
+                d = _mean_direction([frames[m] for m in s])
+                out.append(RawGroup("translation", sorted(s), {**shared, "axis": d}))
+        if len(subs) == 2:
+            mirror = self._mirror(subs[0], subs[1], frames, piv, oriented)
+            if mirror is not None:
+                out.append(RawGroup("reflection", sorted(members), {**shared, **mirror}))
+                return out
+        if len(subs) >= 2:
+            out.append(RawGroup("rotation", sorted(members), shared))
+        return out
+
+    def _mirror(self, s1, s2, frames, piv, oriented) -> dict | None:
+        """The plane mirror exchanging two sets of congruent segments, if any:
+        normal along the line joining their pivots' centroids, through its middle."""
+        c1 = np.mean([piv[m] for m in s1], axis=0)
+        c2 = np.mean([piv[m] for m in s2], axis=0)
+        if np.linalg.norm(c2 - c1) < 2.0 * self._L:
+            return None
+        m = unit(c2 - c1)
+        mid = 0.5 * (c1 + c2)
+
+        def reflect_dir(d):
+            return d - 2.0 * (d @ m) * m
+
+        def reflect_pt(p):
+            return p - 2.0 * ((p - mid) @ m) * m
+
+        d2 = _mean_direction([frames[k] for k in s2])
+        for k in s1:
+            if _angle(reflect_dir(frames[k].direction), d2, oriented) > max(self._atol(k, j) for j in s2):
+                return None
+        tol = 2.0 * self._L
+        for a, b in ((s1, s2), (s2, s1)):
+            for k in a:
+                p = reflect_pt(piv[k])
+                if min(np.linalg.norm(p - piv[j]) for j in b) > tol:
+                    return None
+        return {"mirror_normal": m, "mirror_point": mid}
+
+
+def _mean_direction(frames: list[Frame]) -> np.ndarray:
+    """Mean of unit directions, signs aligned with the first, shape (3,)."""
+    d0 = frames[0].direction
+    acc = np.zeros(3)
+    for f in frames:
+        d = f.direction
+        acc += d if (f.oriented or d @ d0 >= 0) else -d
+    return unit(acc)
