@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from houghcad import palette
-from houghcad.htmlreport import build_html_report, plotly_js, write_html_report
+from houghcad.htmlreport import build_html_report, write_html_report
 from houghcad.io.writers import write_result_ply
 from houghcad.render import draw_sample, render_png
 from houghcad.result import Group, Result, Segment
@@ -180,16 +180,14 @@ def test_html_report_is_self_contained(tmp_path):
     path = tmp_path / "report.html"
     write_html_report(path, pts, res)
     text = path.read_text(encoding="utf-8")
-    lib = plotly_js()
-    assert lib in text  # plotly.js inlined whole
-    own = text.replace(lib, "")
-    # Outside the library (whose source mentions URLs it never fetches here), no URL at all.
-    assert not re.search(r"(?i)(https?:|wss?:|ftp:)?//[a-z0-9.-]+\.[a-z]{2,}", own)
-    assert not re.search(r"(?i)<script[^>]*\bsrc\s*=|<link\b|<img\b|<iframe\b|@import|url\(", own)
-    csp = re.search(r'http-equiv="Content-Security-Policy" content="([^"]*)"', own).group(1)
+    # No URL at all, no element that loads anything, and a policy that forbids it anyway.
+    assert not re.search(r"(?i)(https?:|wss?:|ftp:)?//[a-z0-9.-]+\.[a-z]{2,}", text)
+    assert not re.search(r"(?i)<script[^>]*\bsrc\s*=|<link\b|<img\b|<iframe\b|@import|@font-face", text)
+    assert not re.search(r"\burl\(", text)  # CSS url(...) (toDataURL( is not one)
+    csp = re.search(r'http-equiv="Content-Security-Policy" content="([^"]*)"', text).group(1)
     assert "default-src 'none'" in csp and "connect-src 'none'" in csp and "font-src 'none'" in csp
+    assert "unsafe-eval" not in csp
     data = _embedded(text)
-    assert data["config"]["typesetMath"] is False and data["config"]["showLink"] is False
     assert [t["id"] for t in data["traces"]] == [0, 1, 2, 3, 4, 5, -1]
     assert [t["drawn"] for t in data["traces"]] == [100] * 6 + [20]
 
@@ -221,8 +219,7 @@ def test_html_report_size_for_50k_points():
     text = build_html_report(pts, res)
     assert _embedded(text)["n_drawn"] == n
     size = len(text.encode("utf-8"))
-    assert size < 15e6
-    assert size - len(plotly_js()) < 16 * n + 200_000  # 12 bytes of float32 per point, base64
+    assert size < 16 * n + 200_000  # 12 bytes of float32 per point, base64: ~0.85 MB, far below 15 MB
 
 
 def test_html_report_subsamples_huge_clouds():
@@ -319,8 +316,16 @@ def test_cli_outputs_match_the_json(cli_outputs):
     assert _png_pixels(d / "block.png").shape == (850, 1600, 3)
 
 
-def test_report_renders_in_headless_chromium(browser, cli_outputs):
+def _element_pixels(element) -> np.ndarray:
+    """Screenshot of one element as an (H, W, 3) int array."""
+    import io
+
     from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(element.screenshot_as_png)).convert("RGB")).astype(int)
+
+
+def test_report_renders_in_headless_chromium(browser, cli_outputs):
     from selenium.webdriver.common.by import By
 
     d, _ = cli_outputs
@@ -339,20 +344,37 @@ def test_report_renders_in_headless_chromium(browser, cli_outputs):
     assert browser.find_element(By.ID, "n-segments").text == str(len(res.segments))
 
     # The 3-D view drew the points: many non-background pixels, in the palette's colours.
-    plot = browser.find_element(By.ID, "plot")
-    img = np.asarray(Image.open(__import__("io").BytesIO(plot.screenshot_as_png)).convert("RGB")).astype(int)
+    plot = browser.find_element(By.ID, "view")
+    img = _element_pixels(plot)
     plane_red = np.array(palette.type_color("plane"))
     coloured = (np.abs(img - img[2, 2]).sum(axis=2) > 60)  # differs from the background corner
     assert coloured.mean() > 0.02
     assert (np.abs(img - plane_red).sum(axis=2) < 30).sum() > 50
-    n_traces = browser.execute_script("return document.getElementById('plot').data.length")
-    assert n_traces == len(res.segments) + 1
+    assert browser.execute_script("return window.houghcadView.traces") == len(res.segments) + 1
 
     # Toggles: unticking the plane type hides every plane trace, and only those.
     browser.find_element(By.ID, "type-0").click()
-    vis = browser.execute_script("return document.getElementById('plot').data.map(t => t.visible)")
-    expect = [s.type != "plane" for s in res.segments] + [True]
-    assert vis == expect
+    assert browser.execute_script("return window.houghcadView.visible()") == \
+        [s.type != "plane" for s in res.segments] + [True]
+    assert not browser.find_element(By.ID, "type-0").is_selected()
+    img2 = _element_pixels(plot)
+    assert (np.abs(img2 - plane_red).sum(axis=2) < 30).sum() == 0  # the planes are gone from the picture
     browser.find_element(By.ID, "all").click()
-    vis = browser.execute_script("return document.getElementById('plot').data.map(t => t.visible)")
-    assert vis == [True] * (len(res.segments) + 1)
+    assert browser.execute_script("return window.houghcadView.visible()") == [True] * (len(res.segments) + 1)
+
+    # Colour by type: every plane point in the one base red.
+    browser.find_element(By.CSS_SELECTOR, "input[name=colorby][value=type]").click()
+    assert browser.execute_script("return window.houghcadView.mode()") == "type"
+    img3 = _element_pixels(plot)
+    assert (np.abs(img3 - plane_red).sum(axis=2) < 30).sum() > (np.abs(img - plane_red).sum(axis=2) < 30).sum()
+
+    # A click on a drawn point names its segment.
+    ys, xs = np.nonzero(np.abs(img3 - plane_red).sum(axis=2) < 30)
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    k = len(xs) // 2
+    w, h = plot.size["width"], plot.size["height"]
+    scale = img3.shape[1] / w
+    ActionChains(browser).move_to_element_with_offset(plot, int(xs[k] / scale - w / 2),
+                                                      int(ys[k] / scale - h / 2)).click().perform()
+    assert re.match(r"segment \d+ \(plane\)", browser.find_element(By.ID, "pick").text)
