@@ -270,7 +270,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     written = [out]
     if prim is not None:
         _make_dir(prim.parent)
-        _write(prim, write_fit4cad_primitives, [s.indices for s in result.segments])
+        _write(prim, write_fit4cad_primitives, result.faces())
         written.append(prim)
     written += _write_views(cloud, result, views["ply"], views["png"], views["report"])
 
