@@ -102,7 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="OUT.html",
                    help="also write a self-contained HTML report: interactive 3-D view, tables, timings")
     p.add_argument("--no-merge", action="store_true",
-                   help="skip the association step (no groups; segments of one primitive stay apart)")
+                   help="keep segments lying on one surface apart instead of merging them into one "
+                   "maximal primitive (groups are found either way)")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors (and no progress bar)")
     p.set_defaults(func=_cmd_segment)
 
