@@ -378,3 +378,20 @@ def test_report_renders_in_headless_chromium(browser, cli_outputs):
     ActionChains(browser).move_to_element_with_offset(plot, int(xs[k] / scale - w / 2),
                                                       int(ys[k] / scale - h / 2)).click().perform()
     assert re.match(r"segment \d+ \(plane\)", browser.find_element(By.ID, "pick").text)
+
+
+def test_splat_nearest_point_wins():
+    from houghcad.render import splat
+
+    u = np.array([0.0, 0.0, 0.9])
+    v = np.array([0.0, 0.0, -0.9])
+    depth = np.array([1.0, 2.0, 0.0])
+    colours = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255]], dtype=np.uint8)
+    img = splat(u, v, depth, colours, half=1.0, size=21, radius=1)
+    assert img.shape == (21, 21, 3) and img.dtype == np.uint8
+    assert tuple(img[10, 10]) == (0, 255, 0)  # the nearer of the two centre points
+    assert (img[9:12, 9:12] == [0, 255, 0]).all()  # a 3 x 3 square per point
+    assert tuple(img[19, 19]) == (0, 0, 255)  # v = -0.9 is near the bottom row
+    assert tuple(img[0, 0]) == (255, 255, 255)
+    assert (img == [255, 255, 255]).all(axis=2).sum() == 21 * 21 - 18
+    np.testing.assert_array_equal(img, splat(u, v, depth, colours, 1.0, 21, 1))

@@ -13,13 +13,13 @@ import numpy as np
 from .palette import UNSEGMENTED_COLOR, hex_color, point_colors, type_color, types_present
 from .result import Result
 
-__all__ = ["render_png", "draw_sample", "MAX_DRAWN_POINTS"]
+__all__ = ["render_png", "draw_sample", "principal_frame", "splat", "MAX_DRAWN_POINTS"]
 
 #: Points drawn per view at most; more only slow drawing without a visible change.
 MAX_DRAWN_POINTS = 30_000
 
-# (title, horizontal axis, vertical axis, depth axis pointing at the viewer) of the
-# orthographic views in the cloud's principal frame u1, u2, u3 (largest spread first).
+# (title, horizontal axis, vertical axis, viewing axis) of the orthographic views
+# in the cloud's principal frame u1, u2, u3 (largest spread first).
 _ORTHO_VIEWS = (("view along u3", 0, 1, 2), ("view along u2", 0, 2, 1), ("view along u1", 1, 2, 0))
 
 
@@ -51,6 +51,56 @@ def principal_frame(points: np.ndarray) -> np.ndarray:
     return q @ axes
 
 
+def _iso_basis() -> np.ndarray:
+    """Rows: screen right, screen up, towards the viewer, for the view from (1, 1, 1) with u3 up."""
+    toward = np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0)
+    right = np.cross([0.0, 0.0, 1.0], toward)
+    right /= np.linalg.norm(right)
+    return np.array([right, np.cross(toward, right), toward])
+
+
+def splat(u: np.ndarray, v: np.ndarray, depth: np.ndarray, colors: np.ndarray, half: float, size: int,
+          radius: int = 1, background: int = 255) -> np.ndarray:
+    """Draw points as small squares into an RGB image, the nearest point winning each pixel.
+
+    Parameters
+    ----------
+    u, v : ndarray, shape (N,)
+        Screen coordinates (right, up), world units; the image covers
+        ``[-half, half]`` in both.
+    depth : ndarray, shape (N,)
+        Larger is nearer the viewer.
+    colors : ndarray of uint8, shape (N, 3)
+    half : float
+    size : int
+        Image side in pixels.
+    radius : int
+        Each point covers ``(2 radius + 1)^2`` pixels.
+
+    Returns
+    -------
+    ndarray of uint8, shape (size, size, 3)
+        Row 0 is the top (``v = half``).  Deterministic: ties go to the point
+        listed first.
+    """
+    scale = (size - 1) / (2.0 * half)
+    px = np.rint((u + half) * scale).astype(np.int64)
+    py = np.rint((half - v) * scale).astype(np.int64)
+    d = np.arange(-radius, radius + 1)
+    dx, dy = (g.ravel() for g in np.meshgrid(d, d))
+    X = (px[:, None] + dx[None, :]).ravel()
+    Y = (py[:, None] + dy[None, :]).ravel()
+    point = np.repeat(np.arange(len(u)), len(dx))
+    keep = (X >= 0) & (X < size) & (Y >= 0) & (Y < size)
+    pixel, point = Y[keep] * size + X[keep], point[keep]
+    # Per pixel, the nearest point: sort by pixel, then by decreasing depth, then by point.
+    order = np.lexsort((point, -depth[point], pixel))
+    first = np.unique(pixel[order], return_index=True)[1]
+    img = np.full((size * size, 3), background, dtype=np.uint8)
+    img[pixel[order][first]] = colors[point[order][first]]
+    return img.reshape(size, size, 3)
+
+
 def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result, *,
                title: str | None = None, max_points: int = MAX_DRAWN_POINTS, dpi: int = 100) -> None:
     """Draw ``result`` on ``points`` and write a PNG, atomically.
@@ -71,7 +121,8 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
 
     The top row colours points by type (base colours), the bottom row by
     segment (a shade of the type colour each); the columns are three
-    orthographic views along the world axes and an isometric view.  A legend
+    orthographic views along the principal axes of the cloud
+    (:func:`principal_frame`) and an isometric view in that frame.  A legend
     lists the types present and the unsegmented points.
     """
     # A bare Figure (no pyplot) prints through the Agg canvas: headless, and the
@@ -86,37 +137,37 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
         raise ValueError(f"points must have shape ({result.n_points}, 3), got {pts.shape}")
     sel = draw_sample(len(pts), max_points)
     P = principal_frame(pts[sel])
-    colours = {by: point_colors(result, by)[sel] / 255.0 for by in ("type", "segment")}
+    colours = {by: point_colors(result, by)[sel] for by in ("type", "segment")}
     lo, hi = P.min(axis=0), P.max(axis=0)
-    centre, half = (lo + hi) / 2.0, max(float((hi - lo).max()) / 2.0, 1e-12) * 1.05
-    size = float(np.clip(30000.0 / max(len(P), 1), 1.0, 16.0))  # marker area (pt^2): dense clouds, small dots
+    centre = (lo + hi) / 2.0
+    # Half the side of a view, with a margin: the largest half-extent for the
+    # orthographic views, the half-diagonal for the isometric one.
+    half_ortho = max(float((hi - lo).max()) / 2.0, 1e-12) * 1.05
+    half_iso = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-12) * 1.02
 
     fig = Figure(figsize=(16, 8.5), dpi=dpi)
-    iso_dir = np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0)  # azim 45, elev 35.26: the isometric view
+    # Each view is splatted into an image with numpy (a z-buffer, nearest point wins)
+    # and shown with imshow: ten times faster than matplotlib's scatter and 3-D axes.
+    panel = int(round(3.4 * dpi))  # pixels per side, about the size of one axes
+    iso = _iso_basis()
+    # Depth = right x up: a view as from outside, never mirrored.
+    views = [(name, np.array([np.eye(3)[a], np.eye(3)[b], np.cross(np.eye(3)[a], np.eye(3)[b])]),
+              f"u{a + 1}", f"u{b + 1}", half_ortho) for name, a, b, _ in _ORTHO_VIEWS]
+    views.append(("isometric", iso, None, None, half_iso))
+    radius = 1 if len(P) > 6000 else 2
     for row, by in enumerate(("type", "segment")):
-        C = colours[by]
-        for col, (name, a, b, d) in enumerate(_ORTHO_VIEWS):
+        for col, (name, basis, xl, yl, half) in enumerate(views):
             ax = fig.add_subplot(2, 4, 4 * row + col + 1)
-            order = np.argsort(P[:, d], kind="stable")  # far first, so near points are drawn on top
-            ax.scatter(P[order, a], P[order, b], s=size, c=C[order], marker="o", linewidths=0, rasterized=True)
-            ax.set_xlim(centre[a] - half, centre[a] + half)
-            ax.set_ylim(centre[b] - half, centre[b] + half)
-            ax.set_aspect("equal")
+            Q = (P - centre) @ basis.T  # (horizontal, vertical, towards the viewer)
+            img = splat(Q[:, 0], Q[:, 1], Q[:, 2], colours[by], half, panel, radius)
+            ax.imshow(img, extent=(-half, half, -half, half), interpolation="nearest", origin="upper")
             ax.set_title(f"{name}, by {by}", fontsize=9)
-            ax.set_xlabel(f"u{a + 1}", fontsize=7, labelpad=1)
-            ax.set_ylabel(f"u{b + 1}", fontsize=7, labelpad=1)
-            ax.tick_params(labelsize=7)
-        ax3 = fig.add_subplot(2, 4, 4 * row + 4, projection="3d", proj_type="ortho")
-        order = np.argsort(P @ iso_dir, kind="stable")
-        # depthshade off: colours must stay the palette's exactly.
-        ax3.scatter(P[order, 0], P[order, 1], P[order, 2], s=size, c=C[order], marker="o", linewidths=0,
-                    depthshade=False)
-        ax3.view_init(elev=35.26, azim=45)
-        for setter, c in zip((ax3.set_xlim, ax3.set_ylim, ax3.set_zlim), centre):
-            setter(c - half, c + half)
-        ax3.set_box_aspect((1, 1, 1))
-        ax3.set_title(f"isometric, by {by}", fontsize=9)
-        ax3.tick_params(labelsize=6)
+            if xl is None:  # the isometric view has no meaningful axis values
+                ax.set_axis_off()
+            else:
+                ax.set_xlabel(xl, fontsize=7, labelpad=1)
+                ax.set_ylabel(yl, fontsize=7, labelpad=1)
+                ax.tick_params(labelsize=7)
 
     handles = [Patch(color=hex_color(type_color(t)),
                      label=f"{t} ({sum(s.type == t for s in result.segments)})") for t in types_present(result)]
