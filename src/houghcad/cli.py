@@ -13,6 +13,7 @@ import importlib.resources
 import json
 import math
 import os
+import shutil
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -196,7 +197,10 @@ def _progress_bar(quiet: bool):
         return
     from tqdm import tqdm
 
-    bar = tqdm(total=100, file=sys.stderr, leave=False, dynamic_ncols=True,
+    # A terminal that reports no size (0 x 0, e.g. a bare pty) gets 80 x 24: tqdm
+    # would draw nothing.
+    size = shutil.get_terminal_size((80, 24))
+    bar = tqdm(total=100, file=sys.stderr, leave=False, ncols=min(100, size.columns), nrows=size.lines,
                bar_format="{desc:<12}{percentage:3.0f}%|{bar}| {elapsed}")
 
     def progress(stage: str, fraction: float) -> None:
