@@ -61,7 +61,7 @@ def _fmt_num(x: Any) -> str:
     if isinstance(x, (float, np.floating)):
         return f"{float(x):.5g}" if math.isfinite(x) else str(float(x))
     if isinstance(x, dict):
-        return ", ".join(f"{k} {_fmt_num(v)}" for k, v in x.items())
+        return "{" + ", ".join(f"{k} {_fmt_num(v)}" for k, v in x.items()) + "}"
     return str(x)
 
 
