@@ -207,7 +207,8 @@ def _progress_bar(quiet: bool):
         # The pipeline reports a few dozen times per run: redraw on every call
         # (tqdm's rate limit would hide short stages).
         bar.set_description_str(stage, refresh=False)
-        bar.update(max(0, min(100, round(100.0 * float(fraction))) - bar.n))
+        target = min(100, round(100.0 * float(fraction)))
+        bar.update(max(0, target - bar.n))  # never backwards: a late report of an earlier stage
         bar.refresh()
 
     try:
