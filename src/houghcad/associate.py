@@ -124,6 +124,16 @@ def _line_distance(p: np.ndarray, a: np.ndarray, q: np.ndarray, b: np.ndarray) -
     return float(max(d1, d2))
 
 
+def _pairwise(ids: list[int], dist) -> np.ndarray:
+    """Symmetric matrix (len(ids), len(ids)) of dist(ids[a], ids[b]), zero diagonal."""
+    n = len(ids)
+    D = np.zeros((n, n))
+    for a in range(n):
+        for b in range(a + 1, n):
+            D[a, b] = D[b, a] = dist(ids[a], ids[b])
+    return D
+
+
 def _complete_linkage(D: np.ndarray) -> np.ndarray:
     """Cluster labels (n,) of complete linkage cut at distance 1 on a normalised
     dissimilarity matrix D (n, n)."""
@@ -204,14 +214,14 @@ class Associator:
         surfaces = self._surfaces(cands)
 
         items: list[Item] = []
-        same: list[list[int]] = []  # per surface, the raw members
+        same: list[tuple[list[int], int]] = []  # per merged surface: raw members, number of parts
         for members in surfaces:
             parts_of = self._parts(members, adjacency)
             if len(members) == 1:
                 c = cands[members[0]]
                 items.append(Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], members))
                 continue
-            same.append(members)
+            same.append((members, len(parts_of)))
             idx = np.sort(np.concatenate([cands[m].indices for m in members]))
             prim = self._refit(cands[members[0]].family, cands[members[0]].prim, idx)
             parts = [np.sort(np.concatenate([cands[m].indices for m in p])) for p in parts_of]
@@ -229,8 +239,7 @@ class Associator:
                    for k, c in enumerate(cands)]
             expanded = [RawGroup(g.kind, sorted(m for i in g.members for m in items[i].members), g.descriptors)
                         for g in groups]
-            groups = [RawGroup("same_primitive", sorted(m), {"parts": len(self._parts(m, adjacency))})
-                      for m in same] + expanded
+            groups = [RawGroup("same_primitive", sorted(m), {"parts": n_parts}) for m, n_parts in same] + expanded
             self.items_ = raw
         self.groups_ = groups
         return self
@@ -285,12 +294,13 @@ class Associator:
             return 0.5
         return A
 
+    def _shape_distance(self, fam: Family, dp: dict, dq: dict, L: float, A: float) -> float:
+        """Largest normalised difference between two sets of shape descriptors."""
+        return max((abs(dp[k] - dq[k]) / self._tol(fam, k, dp[k], dq[k], L, A) for k in dp), default=0.0)
+
     def _param_distance(self, fam: Family, p: Primitive, q: Primitive, L: float, A: float) -> float:
         """Normalised dissimilarity of two primitives of one family (≤ 1: may be one surface)."""
-        d = 0.0
-        dp, dq = self._shape(fam, p), self._shape(fam, q)
-        for k in dp:
-            d = max(d, abs(dp[k] - dq[k]) / self._tol(fam, k, dp[k], dq[k], L, A))
+        d = self._shape_distance(fam, self._shape(fam, p), self._shape(fam, q), L, A)
         f, g = fam.frame(p), fam.frame(q)
         if f is None or g is None:
             return d
@@ -317,10 +327,7 @@ class Associator:
                 out.append(ks)
                 continue
             fam = cands[ks[0]].family
-            D = np.zeros((len(ks), len(ks)))
-            for i in range(len(ks)):
-                for j in range(i + 1, len(ks)):
-                    D[i, j] = D[j, i] = self._param_distance(fam, cands[ks[i]].prim, cands[ks[j]].prim, Lp, Ap)
+            D = _pairwise(ks, lambda i, j: self._param_distance(fam, cands[i].prim, cands[j].prim, Lp, Ap))
             lab = _complete_linkage(D)
             for k in np.unique(lab):
                 grp = sorted((ks[i] for i in np.flatnonzero(lab == k)), key=lambda m: -len(cands[m].indices))
@@ -358,8 +365,7 @@ class Associator:
         # An axis fitted on a piece of length h is known to about (length
         # tolerance) / h radians: short holes get a looser angle tolerance.
         span = [e[0] if f is not None and f.kind != "plane" else e[2] for f, e in zip(frames, ext)]
-        unc = [np.arctan2(2.0 * self._L, max(h, 1e-12)) for h in span]
-        self._atol = lambda i, j: self._A + max(unc[i], unc[j])
+        self._unc = [np.arctan2(2.0 * self._L, max(h, 1e-12)) for h in span]
         groups: list[RawGroup] = []
 
         # Congruent segments: one family, equal shape descriptors and extents.
@@ -370,18 +376,13 @@ class Associator:
             if len(ks) < 2:
                 continue
             fam = items[ks[0]].family
-            n = len(ks)
-            D = np.zeros((n, n))
-            for a in range(n):
-                for b in range(a + 1, n):
-                    i, j = ks[a], ks[b]
-                    d = 0.0
-                    for k in shapes[i]:
-                        tol = self._tol(fam, k, shapes[i][k], shapes[j][k], self._L, self._A)
-                        d = max(d, abs(shapes[i][k] - shapes[j][k]) / tol)
-                    tol_e = np.maximum(self._E, self.extent_tol * np.maximum(ext[i], ext[j]))
-                    d = max(d, float(np.max(np.abs(ext[i] - ext[j]) / tol_e)))
-                    D[a, b] = D[b, a] = d
+
+            def congruence(i, j):
+                tol_e = np.maximum(self._E, self.extent_tol * np.maximum(ext[i], ext[j]))
+                return max(self._shape_distance(fam, shapes[i], shapes[j], self._L, self._A),
+                           float(np.max(np.abs(ext[i] - ext[j]) / tol_e)))
+
+            D = _pairwise(ks, congruence)
             for cl in _clusters(D):
                 members = [ks[a] for a in cl]
                 groups.extend(self._congruent(items, members, frames, shapes, ext, piv))
@@ -393,13 +394,12 @@ class Associator:
                  and f.direction is not None]
         coaxial_sets = set()
         if len(axial) >= 2:
-            D = np.zeros((len(axial), len(axial)))
-            for a in range(len(axial)):
-                for b in range(a + 1, len(axial)):
-                    f, g = frames[axial[a]], frames[axial[b]]
-                    d = max(_angle(f.direction, g.direction, False) / self._atol(axial[a], axial[b]),
-                            _line_distance(f.anchor, f.direction, g.anchor, g.direction) / (2.0 * self._L))
-                    D[a, b] = D[b, a] = d
+            def off_axis(i, j):
+                f, g = frames[i], frames[j]
+                return max(_angle(f.direction, g.direction, False) / self._atol(i, j),
+                           _line_distance(f.anchor, f.direction, g.anchor, g.direction) / (2.0 * self._L))
+
+            D = _pairwise(axial, off_axis)
             for cl in _clusters(D):
                 members = sorted(axial[a] for a in cl)
                 coaxial_sets.add(frozenset(members))
@@ -411,11 +411,8 @@ class Associator:
             ks = [i for i, f in enumerate(frames) if f is not None and f.kind in kinds and f.direction is not None]
             if len(ks) < 2:
                 continue
-            D = np.zeros((len(ks), len(ks)))
-            for a in range(len(ks)):
-                for b in range(a + 1, len(ks)):
-                    D[a, b] = D[b, a] = (_angle(frames[ks[a]].direction, frames[ks[b]].direction, False)
-                                         / self._atol(ks[a], ks[b]))
+            D = _pairwise(ks, lambda i, j: _angle(frames[i].direction, frames[j].direction, False)
+                          / self._atol(i, j))
             for cl in _clusters(D):
                 members = sorted(ks[a] for a in cl)
                 if frozenset(members) in coaxial_sets or frozenset(members) in translation_sets:
@@ -423,6 +420,10 @@ class Associator:
                 key = "normal" if kinds == ("plane",) else "axis"
                 groups.append(RawGroup("parallel", members, {key: _mean_direction([frames[m] for m in members])}))
         return groups
+
+    def _atol(self, i: int, j: int) -> float:
+        """Angle tolerance between the axes of items i and j (set by :meth:`_relations`)."""
+        return self._A + max(self._unc[i], self._unc[j])
 
     def _congruent(self, items, members, frames, shapes, ext, piv) -> list[RawGroup]:
         """Translation / rotation / reflection groups among congruent segments."""
@@ -433,12 +434,8 @@ class Associator:
         if f0 is None or f0.direction is None:
             return [RawGroup("translation", sorted(members), shared)]
         oriented = f0.oriented
-        n = len(members)
-        D = np.zeros((n, n))
-        for a in range(n):
-            for b in range(a + 1, n):
-                D[a, b] = D[b, a] = _angle(frames[members[a]].direction, frames[members[b]].direction,
-                                           oriented) / self._atol(members[a], members[b])
+        D = _pairwise(members, lambda i, j: _angle(frames[i].direction, frames[j].direction, oriented)
+                      / self._atol(i, j))
         lab = _complete_linkage(D)
         subs = [[members[i] for i in np.flatnonzero(lab == k)] for k in np.unique(lab)]
         out = []
