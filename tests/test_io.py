@@ -372,12 +372,17 @@ def test_header_only_has_no_points(tmp_path):
     _assert_error(path, e, "no numeric point data")
 
 
+def _replace_line(path, i, text):
+    """Replace line i (0-based) of a text file."""
+    lines = path.read_text().splitlines()
+    lines[i] = text
+    path.write_text("\n".join(lines) + "\n")
+
+
 def test_non_numeric_value_names_file_and_line(tmp_path, cloud):
     pts, _ = cloud
     path = _table(tmp_path / "bad.xyz", pts, header="x y z")
-    lines = path.read_text().splitlines()
-    lines[7] = "1.0 abc 3.0"
-    path.write_text("\n".join(lines) + "\n")
+    _replace_line(path, 7, "1.0 abc 3.0")
     with pytest.raises(InputError) as e:
         read_points(path)
     _assert_error(path, e, "non-numeric", "'abc'", "line 8")
@@ -392,9 +397,7 @@ def test_non_numeric_on_first_line(tmp_path, cloud):
 
 def test_too_few_columns(tmp_path, cloud):
     path = _table(tmp_path / "c.xyz", cloud[0])
-    lines = path.read_text().splitlines()
-    lines[4] = "1.0 2.0"
-    path.write_text("\n".join(lines) + "\n")
+    _replace_line(path, 4, "1.0 2.0")
     with pytest.raises(InputError) as e:
         read_points(path)
     _assert_error(path, e, "line 5", "2 columns")
@@ -402,9 +405,7 @@ def test_too_few_columns(tmp_path, cloud):
 
 def test_fit4cad_non_numeric_names_line(tmp_path, cloud):
     path = _fit4cad(tmp_path / "PC.txt", cloud[0])
-    lines = path.read_text().splitlines()
-    lines[5] = "[1.0, x2, 3.0], "
-    path.write_text("\n".join(lines) + "\n")
+    _replace_line(path, 5, "[1.0, x2, 3.0], ")
     with pytest.raises(InputError) as e:
         read_points(path)
     _assert_error(path, e, "non-numeric", "'x2'", "line 6")
