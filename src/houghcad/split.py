@@ -139,3 +139,52 @@ def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
         if len(pts):
             free[pts] = False
             segments[k] = replace(s, indices=np.union1d(s.indices, pts))
+
+
+def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: float, k: int = 12) -> None:
+    """Give the points that lie on two adjacent segments' surfaces to the smaller one.
+
+    CAD samples include the faces' boundary curves, which lie on both faces;
+    whoever was accepted first took them. To a narrow face (a fillet, a
+    chamfer, a hole) those rows are a large share of its points, to a wide
+    one a negligible share. ``delta``: distance to a surface that counts as
+    on it (standard units).
+    """
+    if len(segments) < 2:
+        return
+    P = ctx.pre.points
+    owner = np.full(len(P), -1, dtype=np.int64)
+    for j, s in enumerate(segments):
+        owner[s.indices] = j
+    sizes = np.array([len(s.indices) for s in segments])
+    pts = np.flatnonzero(owner >= 0)
+    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
+    ok = np.isfinite(dist)
+    nb = np.where(ok, nb, 0)
+    other = np.where(ok, owner[nb], -1)
+    # Pairs (point, adjacent smaller segment), each once.
+    own = owner[pts][:, None]
+    mask = (other >= 0) & (other != own)
+    mask &= sizes[np.maximum(other, 0)] < sizes[own]
+    if not mask.any():
+        return
+    pi = np.broadcast_to(pts[:, None], other.shape)[mask]
+    sj = other[mask]
+    pairs = np.unique(np.stack([sj, pi], axis=1), axis=0)
+    best = owner.copy()
+    best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
+    for j in np.unique(pairs[:, 0]):
+        cand = pairs[pairs[:, 0] == j, 1]
+        s = segments[j]
+        cand = cand[s.family.distance(s.prim, P[cand]) < delta]
+        cand = cand[sizes[j] < best_size[cand]]
+        best[cand] = j
+        best_size[cand] = sizes[j]
+    moved = best != owner
+    if not moved.any():
+        return
+    for j, s in enumerate(segments):
+        keep = s.indices[best[s.indices] == j]
+        add = np.flatnonzero(moved & (best == j))
+        if len(add) or len(keep) < len(s.indices):
+            segments[j] = replace(s, indices=np.union1d(keep, add))
