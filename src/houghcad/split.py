@@ -181,6 +181,12 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
         best[cand] = j
         best_size[cand] = sizes[j]
     moved = best != owner
+    # A segment keeps at least min_points of its own.
+    left = np.bincount(owner[(owner >= 0) & ~moved], minlength=len(segments))
+    short = moved & (owner >= 0)
+    short[short] = left[owner[short]] < ctx.min_points
+    best[short] = owner[short]
+    moved = best != owner
     if not moved.any():
         return
     for j, s in enumerate(segments):
