@@ -142,7 +142,8 @@ def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
 
 
 def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: float, k: int = 12) -> None:
-    """Give the points that lie on two adjacent segments' surfaces to the smaller one.
+    """Give the points that lie on two adjacent segments' surfaces to the smaller one,
+    and unsegmented points that lie on an adjacent segment's surface to it.
 
     CAD samples include the faces' boundary curves, which lie on both faces;
     whoever was accepted first took them. To a narrow face (a fillet, a
@@ -157,22 +158,22 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
     for j, s in enumerate(segments):
         owner[s.indices] = j
     sizes = np.array([len(s.indices) for s in segments])
-    pts = np.flatnonzero(owner >= 0)
+    best = owner.copy()
+    best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
+    pts = np.arange(len(P))
     dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
     ok = np.isfinite(dist)
     nb = np.where(ok, nb, 0)
     other = np.where(ok, owner[nb], -1)
-    # Pairs (point, adjacent smaller segment), each once.
-    own = owner[pts][:, None]
-    mask = (other >= 0) & (other != own)
-    mask &= sizes[np.maximum(other, 0)] < sizes[own]
+    # Pairs (point, adjacent smaller segment), each once; unsegmented points
+    # count as owned by an infinitely large segment.
+    mask = (other >= 0) & (other != owner[pts][:, None])
+    mask &= sizes[np.maximum(other, 0)] < best_size[pts][:, None]
     if not mask.any():
         return
     pi = np.broadcast_to(pts[:, None], other.shape)[mask]
     sj = other[mask]
     pairs = np.unique(np.stack([sj, pi], axis=1), axis=0)
-    best = owner.copy()
-    best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
     for j in np.unique(pairs[:, 0]):
         cand = pairs[pairs[:, 0] == j, 1]
         s = segments[j]
