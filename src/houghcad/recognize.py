@@ -163,10 +163,22 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
     for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
         loc = sel[comp]
         X = P[loc]
-        # A one-row strip is not a surface patch.
+        # A one-row strip is not a surface patch...
         ev = np.linalg.eigvalsh(np.cov(X.T))
         if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
-            continue
+            if not ctx.local:
+                continue
+            # ...unless it is the interior row of a narrow face whose boundary
+            # rows the neighbours took: those rows lie on the surface too.
+            dd, nb = ctx.pre.tree.query(X, k=8, distance_upper_bound=ctx.link)
+            nb = np.unique(nb[np.isfinite(dd)])
+            W = ctx.pre.points[nb]
+            W = W[fam.distance(prim, W) < ctx.tau]
+            if len(W) < 3:
+                continue
+            ev = np.linalg.eigvalsh(np.cov(W.T))
+            if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
+                continue
         if not ctx.local and not fam.well_determined(prim, X, ctx):
             continue
         # On the whole cloud, a candidate whose inliers fit only to a fraction
