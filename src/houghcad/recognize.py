@@ -184,7 +184,7 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
         # On the whole cloud, a candidate whose inliers fit only to a fraction
         # of tau, not to the noise, is a tangent slice of a surface that
         # another family or the per-cluster rounds explain exactly.
-        if not ctx.local and d[loc].mean() > max(2.0 * ctx.pre.noise, 0.2 * ctx.tau):
+        if not ctx.local and d[loc].mean() > max(2.0 * ctx.pre.noise, 0.1 * ctx.tau):
             continue
         out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X), {"d": d[loc]}))
     return out
