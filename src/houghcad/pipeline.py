@@ -14,7 +14,7 @@ from .errors import InputError
 from .preprocess import preprocess
 from .recognize import Candidate, Context, mean_fitting_error, recognize
 from .result import GROUP_KINDS, Group, Part, Result, Segment
-from .split import absorb, accept, splitting_phase
+from .split import absorb, accept, settle_edges, splitting_phase
 
 
 class Segmenter:
@@ -122,6 +122,8 @@ class Segmenter:
 
         splitting_phase(fams, ctx, free, segments, progress=step)
         absorb(segments, free, ctx)
+        # On CAD samples the faces' boundary curves lie on both faces.
+        settle_edges(segments, ctx, max(0.3 * pre.spacing, ctx.tau), ctx.link)
         timing["splitting"] = time.perf_counter() - t2
 
         self._recognised = (segments, pre, ctx, points, source, dict(timing), t0)

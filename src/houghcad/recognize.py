@@ -143,16 +143,49 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
             return []
         prim = new
     ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
+    if ctx.pre.noise < 0.3 * ctx.spacing:
+        # Clean samples lie exactly on their face; a neighbour's tangent band
+        # among the inliers pulls the least squares off it. Refit on the
+        # closer half until the inliers fit to a small fraction of tau, or to
+        # the noise: past it, trimming fits the noise, not the face.
+        for _ in range(4):
+            sel = np.flatnonzero(ok)
+            if len(sel) < 2 * ctx.min_points or d[sel].mean() <= max(0.05 * ctx.tau, ctx.pre.noise):
+                break
+            sel = sel[d[sel] <= np.median(d[sel])]
+            sel = sel[_subsample(len(sel), 600, rng)]
+            new = fam.fit(prim, P[sel], N[sel])
+            if new is None or not fam.valid(new, ctx):
+                break
+            prim = new
+            ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
     sel = np.flatnonzero(ok)
     out = []
     for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
         loc = sel[comp]
         X = P[loc]
-        # A one-row strip is not a surface patch.
+        # A one-row strip is not a surface patch...
         ev = np.linalg.eigvalsh(np.cov(X.T))
         if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
-            continue
+            if not ctx.local:
+                continue
+            # ...unless it is the interior row of a narrow face whose boundary
+            # rows the neighbours took: those rows lie on the surface too.
+            dd, nb = ctx.pre.tree.query(X, k=8, distance_upper_bound=ctx.link)
+            nb = np.unique(nb[np.isfinite(dd)])
+            W = ctx.pre.points[nb]
+            W = W[fam.distance(prim, W) < ctx.tau]
+            if len(W) < 3:
+                continue
+            ev = np.linalg.eigvalsh(np.cov(W.T))
+            if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
+                continue
         if not ctx.local and not fam.well_determined(prim, X, ctx):
+            continue
+        # On the whole cloud, a candidate whose inliers fit only to a fraction
+        # of tau, not to the noise, is a tangent slice of a surface that
+        # another family or the per-cluster rounds explain exactly.
+        if not ctx.local and d[loc].mean() > max(2.0 * ctx.pre.noise, 0.1 * ctx.tau):
             continue
         out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X), {"d": d[loc]}))
     return out

@@ -9,6 +9,8 @@ the vote decides type and parameters.
 
 from __future__ import annotations
 
+import ctypes
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -27,6 +29,48 @@ def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.nda
     out = [idx[lab == k] for k in range(lab.max() + 1)]
     out = [c for c in out if len(c) >= ctx.min_points]
     return sorted(out, key=lambda c: (-len(c), int(c[0])))
+
+
+# CGAL's Random (6.x, Random_numbers/include/CGAL/Random.h): unsigned
+# random_value, val, seed, then a boost::rand48 whose 48-bit state sits in a
+# uint64 at offset 16; 24 bytes in all.
+_CGAL_RANDOM = "_ZZN4CGAL18get_default_randomEvE14default_random"
+_CGAL_RANDOM_GUARD = "_ZGVZN4CGAL18get_default_randomEvE14default_random"
+_cgal_warned = False
+
+
+def seed_cgal_random(seed: int) -> bool:
+    """Put CGAL's default random generator, in the calling thread, in a state
+    given by ``seed``, as ``CGAL::Random(seed)`` would.
+
+    Efficient RANSAC draws from ``CGAL::get_default_random()``, which CGAL
+    seeds with ``time()`` and the Python bindings expose no way to seed: two
+    runs a second apart gave different pieces. The generator is a
+    thread-local object of the bindings' module, found with ``dlsym``, and
+    written here. Returns False (after one warning) where that fails, for
+    example with a CGAL whose ``Random`` has another layout.
+    """
+    global _cgal_warned
+    try:
+        from CGAL import _CGAL_Shape_detection
+
+        lib = ctypes.CDLL(_CGAL_Shape_detection.__file__)
+        addr = ctypes.addressof(ctypes.c_char.in_dll(lib, _CGAL_RANDOM))
+        guard = ctypes.c_char.in_dll(lib, _CGAL_RANDOM_GUARD)
+    except (ImportError, OSError, ValueError, AttributeError):
+        if not _cgal_warned:
+            _cgal_warned = True
+            warnings.warn("cannot seed CGAL's random generator: the RANSAC fallback of the splitting "
+                          "phase may differ between runs", RuntimeWarning, stacklevel=2)
+        return False
+    s = int(seed) & 0xFFFFFFFF
+    head = (ctypes.c_uint32 * 3).from_address(addr)
+    head[0], head[1], head[2] = s % 32749, 0, s
+    ctypes.c_uint64.from_address(addr + 16).value = (s << 16) | 0x330E
+    # A thread-local static is constructed on first use unless its guard is
+    # set; Random has a trivial destructor, so setting it is all there is.
+    guard.value = b"\x01"
+    return True
 
 
 def ransac_pieces(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
@@ -50,6 +94,7 @@ def ransac_pieces(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
     for i, n in enumerate(N.tolist()):
         nm.set(i, Vector_3(*n))
     sm = ps.add_int_map("shape_index")
+    seed_cgal_random(ctx.seed)
     efficient_RANSAC(ps, sm, min_points=max(ctx.min_points, 10), epsilon=max(ctx.tau, 1e-6),
                      cluster_epsilon=ctx.link, normal_threshold=float(np.cos(ctx.angle)), probability=0.01,
                      planes=True, cylinders=True, cones=True, spheres=True, tori=True)
@@ -139,3 +184,59 @@ def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
         if len(pts):
             free[pts] = False
             segments[k] = replace(s, indices=np.union1d(s.indices, pts))
+
+
+def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: float, k: int = 12) -> None:
+    """Give the points that lie on two adjacent segments' surfaces to the smaller one,
+    and unsegmented points that lie on an adjacent segment's surface to it.
+
+    CAD samples include the faces' boundary curves, which lie on both faces;
+    whoever was accepted first took them. To a narrow face (a fillet, a
+    chamfer, a hole) those rows are a large share of its points, to a wide
+    one a negligible share. ``delta``: distance to a surface that counts as
+    on it (standard units).
+    """
+    if len(segments) < 2:
+        return
+    P = ctx.pre.points
+    owner = np.full(len(P), -1, dtype=np.int64)
+    for j, s in enumerate(segments):
+        owner[s.indices] = j
+    sizes = np.array([len(s.indices) for s in segments])
+    best = owner.copy()
+    best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
+    pts = np.arange(len(P))
+    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
+    ok = np.isfinite(dist)
+    nb = np.where(ok, nb, 0)
+    other = np.where(ok, owner[nb], -1)
+    # Pairs (point, adjacent smaller segment), each once; unsegmented points
+    # count as owned by an infinitely large segment.
+    mask = (other >= 0) & (other != owner[pts][:, None])
+    mask &= sizes[np.maximum(other, 0)] < best_size[pts][:, None]
+    if not mask.any():
+        return
+    pi = np.broadcast_to(pts[:, None], other.shape)[mask]
+    sj = other[mask]
+    pairs = np.unique(np.stack([sj, pi], axis=1), axis=0)
+    for j in np.unique(pairs[:, 0]):
+        cand = pairs[pairs[:, 0] == j, 1]
+        s = segments[j]
+        cand = cand[s.family.distance(s.prim, P[cand]) < delta]
+        cand = cand[sizes[j] < best_size[cand]]
+        best[cand] = j
+        best_size[cand] = sizes[j]
+    moved = best != owner
+    # A segment keeps at least min_points of its own.
+    left = np.bincount(owner[(owner >= 0) & ~moved], minlength=len(segments))
+    short = moved & (owner >= 0)
+    short[short] = left[owner[short]] < ctx.min_points
+    best[short] = owner[short]
+    moved = best != owner
+    if not moved.any():
+        return
+    for j, s in enumerate(segments):
+        keep = s.indices[best[s.indices] == j]
+        add = np.flatnonzero(moved & (best == j))
+        if len(add) or len(keep) < len(s.indices):
+            segments[j] = replace(s, indices=np.union1d(keep, add))
