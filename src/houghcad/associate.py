@@ -177,6 +177,10 @@ class Associator:
     extent_tol : float
         Extents are equal within this fraction of their value (and at least
         2 % of the diagonal): they come from the points, not from a fit.
+    contact : float
+        Adjacent pieces of one surface become one part when they touch along
+        at least ``contact`` × √(points of the smaller piece) points: a
+        shared boundary, not a corner.
 
     Attributes (after :meth:`fit`)
     ----------
@@ -185,8 +189,9 @@ class Associator:
     """
 
     def __init__(self, merge: bool = True, angle_tol: float = 2.0, length_tol: float | None = None,
-                 relative_tol: float = 0.02, extent_tol: float = 0.1):
+                 relative_tol: float = 0.02, extent_tol: float = 0.1, contact: float = 0.3):
         self.merge = merge
+        self.contact = contact
         self.angle_tol = angle_tol
         self.length_tol = length_tol
         self.relative_tol = relative_tol
@@ -258,16 +263,38 @@ class Associator:
         return out if out is not None else prim
 
     def _adjacency(self, cands: list[Candidate], link: float) -> set[tuple[int, int]]:
-        """Pairs (i < j) of segments with points closer than ``link``."""
+        """Pairs (i < j) of segments in contact along a line, not at a point.
+
+        Points closer than ``link`` to the other segment are the contact. Two
+        pieces of one face cut apart by the splitting phase share a boundary
+        about as long as their width; two CAD faces of one surface that meet
+        at a corner (Fit4CAD: PC104's four faces of one cylinder) touch at a
+        few points. Contact of fewer than ``contact`` × √(points of the
+        smaller) points on both sides is a point contact.
+        """
         if len(cands) < 2:
             return set()
+        sizes = np.array([len(c.indices) for c in cands])
         idx = np.concatenate([c.indices for c in cands])
-        lab = np.repeat(np.arange(len(cands)), [len(c.indices) for c in cands])
+        lab = np.repeat(np.arange(len(cands)), sizes)
         pairs = cKDTree(self._pre.points[idx]).query_pairs(link, output_type="ndarray")
         a, b = lab[pairs[:, 0]], lab[pairs[:, 1]]
         diff = a != b
-        lo, hi = np.minimum(a[diff], b[diff]), np.maximum(a[diff], b[diff])
-        return set(zip(lo.tolist(), hi.tolist()))
+        if not diff.any():
+            return set()
+        pa, pb, a, b = pairs[diff, 0], pairs[diff, 1], a[diff], b[diff]
+        # (segment, other segment, point of the segment) once each: contact
+        # points per ordered pair.
+        n = len(cands)
+        key = np.unique(np.concatenate([(a * n + b) * len(idx) + pa, (b * n + a) * len(idx) + pb]))
+        seg_pair, count = np.unique(key // len(idx), return_counts=True)
+        i, j = seg_pair // n, seg_pair % n
+        lo, hi = np.minimum(i, j), np.maximum(i, j)
+        best: dict[tuple[int, int], int] = {}
+        for u, v, c in zip(lo.tolist(), hi.tolist(), count.tolist()):
+            best[(u, v)] = max(best.get((u, v), 0), c)
+        return {(u, v) for (u, v), c in best.items()
+                if c >= self.contact * np.sqrt(min(sizes[u], sizes[v]))}
 
     def _parts(self, members: list[int], adjacency: set[tuple[int, int]]) -> list[list[int]]:
         """Connected components of members under adjacency (lists of members)."""

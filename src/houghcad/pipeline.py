@@ -43,7 +43,7 @@ class Segmenter:
         connected pieces are kept as ``parts``). Groups are found either way.
     association : dict, optional
         Options of :class:`houghcad.associate.Associator` (``angle_tol``,
-        ``length_tol``, ``relative_tol``, ``extent_tol``).
+        ``length_tol``, ``relative_tol``, ``extent_tol``, ``contact``).
 
     Attributes
     ----------
