@@ -1260,14 +1260,15 @@ def generalized_cone_part(
     """Prism-like body on one n-convexity directrix (paper Fig. 9(c)): a generalised cylinder of
     size a1 for 0 ≤ z ≤ h1, a generalised cone tapering from a1 to a2 < a1 for h1 ≤ z ≤ h1 + hc, a
     second generalised cylinder of size a2 up to z = L, and flat ends (plane discs trimmed to the
-    directrix by the solid). All three curved faces share order, b and phase.
+    directrix by the solid). All three curved faces share order (3–6), b and phase.
 
     Primitives (5): 0 generalised cylinder a1, 1 generalised cone, 2 generalised cylinder a2,
     3 end plane z=0, 4 end plane z=L. Every label is one connected piece.
     """
     st = _Streams.from_seed(seed, "generalized_cone_part")
     g = st.shape
-    order, b = _directrix_random(g)
+    order = int(g.integers(3, 7))  # a few marked convexities, as in the paper's part (n = 5)
+    b = float(g.uniform(0.08, np.clip(4.0 / (order * order - 1), 0.1, 0.3)))
     a1 = g.uniform(0.8, 1.2)
     a2 = a1 * g.uniform(0.45, 0.7)
     h1, hc, h2 = a1 * g.uniform(1.0, 1.6), a1 * g.uniform(0.6, 1.0), a1 * g.uniform(0.8, 1.4)

@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Primitive, planes_intersection, register, unit
-from .generalized_cylinder import (B_MAX, B_MIN, N_VALUES, DirectrixPlacement, active_order, best_order,
+from .generalized_cylinder import (B_MAX, B_MIN, N_VALUES, DirectrixPlacement, active_order, best_order, debias_b,
                                    normalise_shape, phase_frame, polar_fit, polar_local, ref_basis, sampson,
                                    vote_grid)
 
@@ -209,6 +209,8 @@ class GeneralizedCone(Family):
             return None
         f1, f2, _ = ref_basis(ax, e1)
         b, phi = normalise_shape(b, phi, n)
+        v = P - apex
+        b = debias_b(b, n, sol.fun, np.hypot(v @ f1, v @ f2))
         ref = np.cos(phi) * f1 + np.sin(phi) * f2
         return Primitive(self.name, {"apex": apex, "axis": ax, "ref_dir": ref, "slope": float(s), "b": float(b),
                                      "n": n})
