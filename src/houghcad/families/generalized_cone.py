@@ -1,0 +1,233 @@
+"""Generalised cones over an n-convexity directrix (paper Table 2(b)).
+
+The paper's x = a v cos u / (1 + b cos nu), y = a v sin u / (1 + b cos nu),
+z = A v + B has a scale redundancy (a, v, A); it is fixed here by A = 1 and
+B = 0 with z measured from the apex along the axis, so that a is the
+dimensionless ``slope``: the cross-section at height z is the directrix
+ρ(θ) = slope · z / (1 + b cos n(θ − φ)).
+
+Standard form: apex at the origin (least-squares point of the tangent planes,
+which all pass through it), axis z. The central projection (x/z, y/z) of the
+points is the directrix of size ``slope``; its centre there is the axis'
+offset (iterated), the linear polar fit of :mod:`.generalized_cylinder` gives
+the order n (swept 2 … 12) and the phase φ, and (b, slope) are voted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial import cKDTree
+
+from ..preprocess import rotation_to_z
+from .base import Frame, Family, Primitive, planes_intersection, register, unit
+from .generalized_cylinder import (B_MAX, B_MIN, N_VALUES, DirectrixPlacement, active_order, best_order, debias_b,
+                                   normalise_shape, phase_frame, polar_fit, polar_local, ref_basis, sampson,
+                                   vote_grid)
+
+
+def projected(Pl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Central projection (x/z, y/z) (m, 2) of the local points with z > 0, and their mask (n,)."""
+    z = Pl[:, 2]
+    ok = z > 1e-9 * (np.abs(Pl).max() + 1e-12)
+    return Pl[ok, :2] / z[ok, None], ok
+
+
+def cone_directrix_frame(P: np.ndarray, N: np.ndarray, iters: int = 4):
+    """Apex (3,), frame R (3, 3) (rows: ref_dir, ·, axis) and order n of a generalised cone, or None."""
+    apex, cond = planes_intersection(P, N)
+    if cond < 1e-6:
+        return None
+    u = unit(P - apex)
+    axis = np.linalg.eigh(np.cov(u.T))[1][:, 0]
+    if axis @ u.mean(axis=0) < 0:
+        axis = -axis
+    n = None
+    for _ in range(iters):
+        R = rotation_to_z(axis)
+        W, _ = projected((P - apex) @ R.T)
+        fit = best_order(W, np.zeros(2))
+        if fit is None:
+            return None
+        n, c = fit[0], fit[1]
+        axis = unit(R.T @ np.array([c[0], c[1], 1.0]))
+        if np.linalg.norm(c) < 1e-6:
+            break
+    R = rotation_to_z(axis)
+    W, _ = projected((P - apex) @ R.T)
+    if len(W) < 10:
+        return None
+    th, rho = np.arctan2(W[:, 1], W[:, 0]), np.hypot(W[:, 0], W[:, 1])
+    p, _ = polar_fit(th, rho, n)
+    phi = float(np.arctan2(p[2], p[1]) / n)
+    return apex, phase_frame(R, phi), int(n)
+
+
+def _rulings(u: np.ndarray, s: float, b: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Ruling directions D(u) = (ρ_s cos u, ρ_s sin u, 1) and D'(u), each (m, 3) (local frame)."""
+    c, si = np.cos(u), np.sin(u)
+    g = 1.0 + b * np.cos(n * u)
+    r = s / g
+    r1 = s * b * n * np.sin(n * u) / g**2
+    D = np.stack([r * c, r * si, np.ones_like(u)], axis=1)
+    D1 = np.stack([r1 * c - r * si, r1 * si + r * c, np.zeros_like(u)], axis=1)
+    return D, D1
+
+
+def ruling_foot(q: np.ndarray, s: float, b: float, n: int, iters: int = 5) -> np.ndarray:
+    """Parameter u (m,) of the ruling closest in angle to local points q (m, 3).
+
+    The distance to a half-line through the apex is |q| sin(angle), so the
+    nearest ruling is the one of smallest angle: nearest of a dense sample of
+    unit ruling directions (cKDTree), then vectorised Newton steps on
+    q̂·D̂(u) (second derivative by central differences of the first).
+    """
+    m = int(max(720, 96 * n))
+    us = np.linspace(0.0, 2 * np.pi, m, endpoint=False)
+    D, _ = _rulings(us, s, b, n)
+    qh = unit(q)
+    u = us[cKDTree(unit(D)).query(qh)[1]]
+    h = 2 * np.pi / m
+
+    def slope1(v):
+        D, D1 = _rulings(v, s, b, n)
+        nd = np.linalg.norm(D, axis=1)
+        qd = np.einsum("ij,ij->i", qh, D)
+        return np.einsum("ij,ij->i", qh, D1) / nd - qd * np.einsum("ij,ij->i", D, D1) / nd**3
+
+    for _ in range(iters):
+        f1 = slope1(u)
+        f2 = (slope1(u + 1e-5) - slope1(u - 1e-5)) / 2e-5
+        step = np.where(f2 < -1e-12, -f1 / np.where(f2 < -1e-12, f2, -1.0), np.sign(f1) * h)
+        u = u + np.clip(step, -h, h)
+    return u
+
+
+@register
+class GeneralizedCone(Family):
+    name = "generalized_cone"
+    param_names = ("apex", "axis", "ref_dir", "slope", "b", "n", "A", "B")
+    n_unknowns = 2
+    complexity = 7
+    simple = False
+    global_search = True
+
+    # --- standard form -------------------------------------------------------------------
+    def placements(self, P, N, ctx):
+        fr = cone_directrix_frame(P, N)
+        if fr is None:
+            return []
+        apex, R, n = fr
+        return [DirectrixPlacement(R, apex, {"n": n})]
+
+    def _order(self, Pl):
+        n = active_order()
+        if n is None:  # called outside propose(): analyse the points themselves
+            W, _ = projected(Pl)
+            fit = best_order(W, np.zeros(2), trim=False)
+            n = 2 if fit is None else fit[0]
+        return n
+
+    def region(self, Pl, Nl, ctx):
+        W, ok = projected(Pl)
+        s = np.hypot(W[:, 0], W[:, 1]) if len(W) else np.ones(1)
+        zt = float(np.median(Pl[ok, 2])) if ok.any() else 1.0
+        hi = float(min(s.max() * (1 + B_MAX), np.tan(np.radians(85.0))))
+        return vote_grid(self._order(Pl), hi, ctx.cell / max(zt, 1e-6), float(np.median(s)))
+
+    def gamma(self, Pl, Nl, grid, ctx):
+        # Sweep b over its bins and solve slope = (ρ/z)(1 + b cos nθ) (phase 0 in this frame).
+        n = self._order(Pl)
+        W, ok = projected(Pl)
+        idx = np.flatnonzero(ok)
+        th, s = polar_local(W)
+        b = grid.centers(1)
+        S = s[:, None] * (1.0 + b[None, :] * np.cos(n * th)[:, None])
+        voter = np.repeat(idx, len(b))
+        vals = np.stack([np.full(S.size, float(n)), np.broadcast_to(b, S.shape).ravel(), S.ravel()], axis=1)
+        return voter, vals
+
+    def primitive(self, values, placement):
+        return Primitive(self.name, {"apex": placement.origin.copy(), "axis": placement.R[2].copy(),
+                                     "ref_dir": placement.R[0].copy(), "slope": float(values[2]),
+                                     "b": float(values[1]), "n": int(round(values[0]))})
+
+    # --- geometry ------------------------------------------------------------------------
+    def _local(self, prim, P):
+        e1, e2, ax = ref_basis(prim.params["axis"], prim.params["ref_dir"])
+        v = P - prim.params["apex"]
+        return np.stack([v @ e1, v @ e2, v @ ax], axis=1), (e1, e2, ax)
+
+    def distance(self, prim, P):
+        p = prim.params
+        q, _ = self._local(prim, P)
+        u = ruling_foot(q, p["slope"], p["b"], p["n"])
+        D, _ = _rulings(u, p["slope"], p["b"], p["n"])
+        Dh = unit(D)
+        along = np.einsum("ij,ij->i", q, Dh)
+        return np.where(along > 0, np.linalg.norm(np.cross(q, Dh), axis=1), np.linalg.norm(q, axis=1))
+
+    def surface_normals(self, prim, P):
+        p = prim.params
+        q, (e1, e2, ax) = self._local(prim, P)
+        u = ruling_foot(q, p["slope"], p["b"], p["n"])
+        D, D1 = _rulings(u, p["slope"], p["b"], p["n"])
+        m = unit(np.cross(D1, D))
+        return unit(m[:, :1] * e1 + m[:, 1:2] * e2 + m[:, 2:] * ax)
+
+    def valid(self, prim, ctx):
+        p = prim.params
+        return (np.tan(np.radians(2.0)) < p["slope"] < np.tan(np.radians(85.0)) and B_MIN <= p["b"] <= B_MAX
+                and p["n"] in N_VALUES)
+
+    def fit(self, prim, P, N):
+        p0 = prim.params
+        n = int(p0["n"])
+        e1, e2, a0 = ref_basis(p0["axis"], p0["ref_dir"])
+
+        def unpack(x):
+            return p0["apex"] + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5], x[6], x[7]
+
+        def res(x):
+            apex, ax, s, b, phi = unpack(x)
+            f1, f2, _ = ref_basis(ax, e1)
+            v = P - apex
+            X, Y, Z = v @ f1, v @ f2, v @ ax
+            rho, th = np.hypot(X, Y), np.arctan2(Y, X) - phi
+            g = 1.0 + b * np.cos(n * th)
+            return sampson(rho * g - s * Z, g**2 + (b * n * np.sin(n * th)) ** 2 + s * s)
+
+        x0 = np.array([0, 0, 0, 0, 0, p0["slope"], p0["b"], 0.0])
+        try:
+            sol = least_squares(res, x0, method="lm", max_nfev=80)
+        except Exception:
+            return None
+        apex, ax, s, b, phi = unpack(sol.x)
+        if not (np.isfinite(sol.x).all() and s > 0):
+            return None
+        if np.mean((P - apex) @ ax) < 0:
+            return None
+        f1, f2, _ = ref_basis(ax, e1)
+        b, phi = normalise_shape(b, phi, n)
+        v = P - apex
+        b = debias_b(b, n, sol.fun, np.hypot(v @ f1, v @ f2))
+        ref = np.cos(phi) * f1 + np.sin(phi) * f2
+        return Primitive(self.name, {"apex": apex, "axis": ax, "ref_dir": ref, "slope": float(s), "b": float(b),
+                                     "n": n})
+
+    # --- output --------------------------------------------------------------------------
+    def to_world(self, prim, T):
+        p = prim.params
+        e1, _, ax = ref_basis(p["axis"], p["ref_dir"])
+        return {"apex": T.inv_points(p["apex"]).tolist(), "axis": unit(T.inv_dirs(ax)).tolist(),
+                "ref_dir": unit(T.inv_dirs(e1)).tolist(), "slope": float(p["slope"]), "b": float(p["b"]),
+                "n": int(p["n"]), "A": 1.0, "B": 0.0}
+
+    integer_descriptors = ("n",)
+
+    def descriptors(self, prim):
+        p = prim.params
+        return {"slope": float(p["slope"]), "b": float(p["b"]), "n": int(p["n"])}
+
+    def frame(self, prim):
+        return Frame("point", np.asarray(prim.params["apex"], float), unit(prim.params["axis"]), oriented=True)
