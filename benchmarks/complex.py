@@ -1,0 +1,229 @@
+#!/usr/bin/env python
+"""Complex-family benchmark (issue 3): single instances and composite parts.
+
+Usage::
+
+    python benchmarks/complex.py [--instances 20] [--points 4000] [--noise 0.005] [--missing 0.1]
+                                 [--families NAMES] [--jobs 2] [--no-write]
+
+For every complex family of :mod:`houghcad.synth` (a family registered with ``simple = False``
+that has a sampler), ``--instances`` random instances (random pose and scale, Gaussian noise σ =
+``--noise`` × diagonal, ``--missing`` of the surface cut away as one region) go through
+``houghcad.segment(points, families="all")``. An instance passes when
+
+- a segment of the right type has DSC ≥ 0.9 against the surface's points, and
+- its key parameters (:data:`KEY_PARAMS`: radii, a, b, semi-axes…) are within 2 % relative,
+  integers exact.
+
+Composite parts (:data:`COMPOSITES`, when present in ``synth.PARTS``) are scored with the
+Fit4CAD measures (mean DSC over their faces) and the largest MFE of a complex segment.
+
+The summary goes between the ``<!-- complex:begin/end -->`` markers of BENCHMARKS.md unless
+``--no-write``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import multiprocessing as mp
+import re
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+BENCHMARKS_MD = REPO_ROOT / "BENCHMARKS.md"
+
+#: Parameters compared with the ground truth, per family (world units). Integers must be exact,
+#: other values within ``REL_TOL`` relative; vectors are compared sorted, element-wise.
+KEY_PARAMS: dict[str, tuple[str, ...]] = {
+    "ellipsoid": ("semi_axes",),
+    "generalized_cylinder": ("a", "b", "n"),
+    "generalized_cone": ("a", "slope", "b", "n"),
+    "surface_of_revolution": (),  # the profile's own parameters, see _keys
+    "helical_surface": ("R1", "R2", "n", "k1"),
+    "helical_strip": ("r_inner", "r_outer", "pitch"),
+    "annulus": ("r_inner", "r_outer"),
+}
+INTEGER_PARAMS = ("n",)
+REL_TOL = 0.02
+DSC_MIN = 0.9
+COMPOSITES = ("screw_part", "generalized_cone_part", "ellipsoid_part")
+
+
+def complex_families() -> list[str]:
+    from houghcad import synth
+    from houghcad.families import REGISTRY
+
+    return [n for n, f in REGISTRY.items() if not f.simple and n in synth.SAMPLERS]
+
+
+def _keys(family: str, truth: dict) -> list[str]:
+    keys = [k for k in KEY_PARAMS.get(family, ()) if k in truth]
+    if family == "surface_of_revolution":
+        # Every scalar the profile has, except placement along the axis.
+        keys = [k for k, v in truth.items() if np.isscalar(v) and not isinstance(v, str)
+                and k not in ("offset",)]
+    return keys
+
+
+def param_errors(family: str, truth: dict, found: dict) -> dict[str, float]:
+    """Relative error per key parameter (integers: 0 when equal, inf otherwise)."""
+    out: dict[str, float] = {}
+    if family == "surface_of_revolution" and truth.get("profile") != found.get("profile"):
+        return {"profile": float("inf")}
+    for k in _keys(family, truth):
+        if k not in found:
+            out[k] = float("inf")
+            continue
+        g, f = np.atleast_1d(np.asarray(truth[k], float)), np.atleast_1d(np.asarray(found[k], float))
+        if g.shape != f.shape:
+            out[k] = float("inf")
+            continue
+        if k in INTEGER_PARAMS:
+            out[k] = 0.0 if np.array_equal(np.round(g), np.round(f)) else float("inf")
+            continue
+        if g.size > 1:
+            g, f = np.sort(g), np.sort(f)
+        out[k] = float(np.max(np.abs(f - g) / np.maximum(np.abs(g), 1e-12)))
+    return out
+
+
+def run_single(args):
+    family, seed, n_points, noise, missing = args
+    import houghcad
+    from houghcad import synth
+
+    cloud = synth.single(family, seed=seed, n_points=n_points, noise=noise, missing=missing)
+    truth_idx = np.flatnonzero(cloud.labels == 0)
+    t = time.perf_counter()
+    res = houghcad.segment(cloud.points, families="all", seed=0)
+    dt = time.perf_counter() - t
+    best, best_dsc = None, 0.0
+    for s in res.segments:
+        if s.type != family:
+            continue
+        inter = len(np.intersect1d(s.indices, truth_idx, assume_unique=True))
+        dsc = 2 * inter / (len(s.indices) + len(truth_idx))
+        if dsc > best_dsc:
+            best, best_dsc = s, dsc
+    types = sorted({s.type for s in res.segments})
+    if best is None:
+        return dict(family=family, seed=seed, ok=False, dsc=0.0, errors={}, mfe=float("nan"), seconds=dt,
+                    found=",".join(types))
+    errs = param_errors(family, cloud.primitives[0]["params"], best.params)
+    ok = best_dsc >= DSC_MIN and all(e <= REL_TOL for e in errs.values())
+    return dict(family=family, seed=seed, ok=ok, dsc=best_dsc, errors=errs, mfe=best.mfe, seconds=dt,
+                found=",".join(types))
+
+
+def run_part(args):
+    name, seed, n_points, noise = args
+    import houghcad
+    from houghcad import synth
+    from houghcad.evaluate import classification_measures
+    from houghcad.families import REGISTRY
+
+    cloud = synth.PARTS[name](seed=seed, n_points=n_points, noise=noise)
+    t = time.perf_counter()
+    res = houghcad.segment(cloud.points, families="all", seed=0)
+    dt = time.perf_counter() - t
+    m = classification_measures([np.asarray(f) for f in res.faces()], cloud.segments(), len(cloud.points))
+    cplx = [s.mfe for s in res.segments if s.type in REGISTRY and not REGISTRY[s.type].simple]
+    return dict(part=name, seed=seed, dsc=float(m["DSC"]), max_mfe=max(cplx) if cplx else float("nan"),
+                n_complex=len(cplx), seconds=dt, types=",".join(sorted({s.type for s in res.segments})))
+
+
+def _fmt(x: float) -> str:
+    return "—" if not np.isfinite(x) else f"{100 * x:.2f} %"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--instances", type=int, default=20)
+    ap.add_argument("--points", type=int, default=4000)
+    ap.add_argument("--noise", type=float, default=0.005)
+    ap.add_argument("--missing", type=float, default=0.1)
+    ap.add_argument("--families", default=None, help="comma-separated complex families (default: all)")
+    ap.add_argument("--part-seeds", type=int, default=3)
+    ap.add_argument("--part-points", type=int, default=12000)
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--no-write", action="store_true")
+    a = ap.parse_args(argv)
+    from houghcad import synth
+
+    fams = complex_families() if a.families is None else [f.strip() for f in a.families.split(",") if f.strip()]
+    cases = [(f, s, a.points, a.noise, a.missing) for f in fams for s in range(a.instances)]
+    parts = [p for p in COMPOSITES if p in synth.PARTS]
+    part_cases = [(p, s, a.part_points, a.noise) for p in parts for s in range(a.part_seeds)]
+    rows, prow = [], []
+    with mp.get_context("spawn").Pool(a.jobs) as pool:
+        for r in pool.imap(run_single, cases):
+            rows.append(r)
+            err = ", ".join(f"{k} {_fmt(v)}" for k, v in r["errors"].items())
+            print(f"{r['family']:<22} seed {r['seed']:<3} {'ok ' if r['ok'] else 'MISS'} DSC {r['dsc']:.3f} "
+                  f"{err}  MFE {r['mfe']:.4f}  {r['seconds']:.1f} s  [{r['found']}]", file=sys.stderr, flush=True)
+        for r in pool.imap(run_part, part_cases):
+            prow.append(r)
+            print(f"{r['part']:<22} seed {r['seed']:<3} DSC {r['dsc']:.3f} max complex MFE {r['max_mfe']:.4f} "
+                  f"{r['seconds']:.1f} s [{r['types']}]", file=sys.stderr, flush=True)
+
+    lines = ["| family | passed | segment DSC ≥ 0.9 | key parameters (median / max rel. error) | "
+             "integers exact | max MFE | median s |", "|---|---|---|---|---|---|---|"]
+    for f in fams:
+        rs = [r for r in rows if r["family"] == f]
+        keys = sorted({k for r in rs for k in r["errors"]} - set(INTEGER_PARAMS))
+        per = []
+        for k in keys:
+            e = np.array([r["errors"].get(k, np.inf) for r in rs if r["errors"]])
+            per.append(f"{k} {_fmt(float(np.median(e)))} / {_fmt(float(e.max()))}" if len(e) else f"{k} —")
+        ints = [r["errors"][k] == 0 for r in rs for k in INTEGER_PARAMS if k in r["errors"]]
+        mfe = np.array([r["mfe"] for r in rs if np.isfinite(r["mfe"])])
+        lines.append(f"| {f} | {sum(r['ok'] for r in rs)}/{len(rs)} | {sum(r['dsc'] >= DSC_MIN for r in rs)}/{len(rs)} | "
+                     f"{'; '.join(per) or '—'} | {f'{sum(ints)}/{len(ints)}' if ints else '—'} | "
+                     f"{mfe.max() if len(mfe) else float('nan'):.4f} | "
+                     f"{np.median([r['seconds'] for r in rs]):.1f} |")
+    plines = []
+    if prow:
+        plines = ["", "| composite part | mean DSC | per seed | max MFE of a complex segment | median s |",
+                  "|---|---|---|---|---|"]
+        for p in parts:
+            rs = [r for r in prow if r["part"] == p]
+            per_seed = ", ".join("%.3f" % r["dsc"] for r in rs)
+            worst = max((r["max_mfe"] for r in rs if np.isfinite(r["max_mfe"])), default=float("nan"))
+            plines.append(f"| {p} | {np.mean([r['dsc'] for r in rs]):.3f} | {per_seed} | {worst:.4f} | "
+                          f"{np.median([r['seconds'] for r in rs]):.1f} |")
+    cmd = "python benchmarks/complex.py " + " ".join(shlex.quote(x) for x in (argv or sys.argv[1:]))
+    section = "\n".join([
+        "<!-- complex:begin -->",
+        "## Complex families (issue 3)",
+        "",
+        f"- Date: {_dt.date.today().isoformat()}",
+        f"- Command: `{cmd.strip()}`",
+        f"- {a.instances} instances per family, {a.points} points, noise σ = {a.noise} × diagonal, "
+        f"{a.missing:.0%} of the surface cut away, random pose and scale; `segment(families=\"all\")`.",
+        f"- Pass: a segment of the right type with DSC ≥ {DSC_MIN} and key parameters within "
+        f"{REL_TOL:.0%} (integers exact). Targets: ≥ 95 % of instances; MFE ≤ 0.01.",
+        "",
+        *lines,
+        *plines,
+        "<!-- complex:end -->",
+        "",
+    ])
+    print(section)
+    if not a.no_write:
+        text = BENCHMARKS_MD.read_text(encoding="utf-8")
+        pat = re.compile(r"<!-- complex:begin -->.*?<!-- complex:end -->\n?", re.DOTALL)
+        text = pat.sub(lambda _: section, text) if pat.search(text) else text.rstrip("\n") + "\n\n" + section
+        tmp = BENCHMARKS_MD.with_suffix(".md.tmp")
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(BENCHMARKS_MD)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
