@@ -9,6 +9,7 @@ from __future__ import annotations
 from ..errors import InputError
 from .base import REGISTRY, Family, Frame, Placement, Primitive, register
 from . import plane, cylinder, sphere, cone, torus  # noqa: F401  (registration)
+from . import helical_surface, helical_strip, annulus  # noqa: F401  (registration)
 
 SIMPLE = ("plane", "cylinder", "cone", "sphere", "torus")
 
