@@ -19,6 +19,7 @@ docs/family-annulus.md.
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from ..hough import Grid
@@ -28,7 +29,7 @@ from .cylinder import circle_centers
 from ._helix import band_edges
 
 
-def boundary_directions(Q: np.ndarray, k: int = 10, ratio: float = 0.35) -> tuple[np.ndarray, np.ndarray, float]:
+def boundary_directions(Q: np.ndarray, k: int = 20, ratio: float = 0.45) -> tuple[np.ndarray, np.ndarray, float]:
     """Boundary points of a 2-D point set Q (n, 2) and their inward directions.
 
     A point is on the boundary when the centroid of its k nearest neighbours
@@ -48,36 +49,27 @@ def boundary_directions(Q: np.ndarray, k: int = 10, ratio: float = 0.35) -> tupl
     return mask, off / np.maximum(ln, 1e-15)[:, None], float(np.median(dist[:, 1]))
 
 
-def concentric_circles(Q: np.ndarray, c0: np.ndarray, tol: float, iters: int = 4):
+def concentric_circles(Q: np.ndarray, c0: np.ndarray, scale: float, radii=None):
     """Centre (2,) and radii (r_in, r_out) of two concentric circles through the
-    2-D boundary points Q (m, 2), by the algebraic (Kåsa) fit
-    x² + y² = 2 c·x + d_k, linear in (c, d_in, d_out). Points are split by
-    the mid radius around the current centre; points farther than ``tol``
-    from both circles (straight cuts of the region) are dropped each round.
-    Returns None when a circle has too few points."""
-    c = np.asarray(c0, float)
-    keep = np.ones(len(Q), bool)
-    r_in = r_out = None
-    for _ in range(iters):
-        rho = np.linalg.norm(Q - c, axis=1)
-        if r_in is None:
-            lo, hi = np.quantile(rho[keep], [0.05, 0.95])
-            mid = 0.5 * (lo + hi)
-        else:
-            mid = 0.5 * (r_in + r_out)
-            keep = np.minimum(np.abs(rho - r_in), np.abs(rho - r_out)) < tol
-        inner = rho < mid
-        if (keep & inner).sum() < 5 or (keep & ~inner).sum() < 5:
-            return None
-        X = Q[keep]
-        A = np.c_[2 * X, inner[keep], ~inner[keep]].astype(float)
-        sol = np.linalg.lstsq(A, (X**2).sum(1), rcond=None)[0]
-        c = sol[:2]
-        d = sol[2:] + c @ c
-        if (d <= 0).any():
-            return None
-        r_in, r_out = np.sqrt(d)
-    return c, (float(r_in), float(r_out))
+    2-D boundary points Q (m, 2): robust least squares (soft-L1 loss of
+    ``scale``) of each point's distance to the nearer circle, so that straight
+    cuts of a partial annulus count as outliers. Starts from the centre c0
+    and ``radii`` (default: the 5 % and 95 % quantiles of the radii). Returns
+    None when it fails."""
+    c0 = np.asarray(c0, float)
+    rho = np.linalg.norm(Q - c0, axis=1)
+    r0 = np.quantile(rho, [0.05, 0.95]) if radii is None else np.asarray(radii, float)
+
+    def res(x):
+        r = np.linalg.norm(Q - x[:2], axis=1)
+        return np.minimum(np.abs(r - x[2]), np.abs(r - x[3]))
+
+    try:
+        sol = least_squares(res, np.r_[c0, r0], loss="soft_l1", f_scale=max(scale, 1e-9), max_nfev=100)
+    except Exception:
+        return None
+    c, (r1, r2) = sol.x[:2], sorted(np.abs(sol.x[2:]))
+    return (c, (float(r1), float(r2))) if np.isfinite(sol.x).all() else None
 
 
 @register
@@ -101,7 +93,7 @@ class Annulus(Family):
             return []
         out = []
         for c in circle_centers(Q[mask], M[mask], ctx, 2):
-            fitc = concentric_circles(Q[mask], c, max(3 * ctx.pre.noise, 2 * ctx.spacing))
+            fitc = concentric_circles(Q[mask], c, max(ctx.pre.noise, ctx.spacing))
             cc = fitc[0] if fitc is not None else c
             rho = np.linalg.norm(Q - cc, axis=1)
             out.append(Placement(R, R.T @ np.array([cc[0], cc[1], 0.0]), {"rho": rho}))
@@ -158,7 +150,8 @@ class Annulus(Family):
         mask, _, sp = boundary_directions(Q)
         h = (P - m) @ n
         sigma = float(np.sqrt(np.mean(h**2)))
-        got = concentric_circles(Q[mask], c0, max(3 * sigma, 3 * sp)) if mask.sum() >= 10 else None
+        got = (concentric_circles(Q[mask], c0, max(sigma, sp), (prim.params["r_inner"], prim.params["r_outer"]))
+               if mask.sum() >= 10 else None)
         c = got[0] if got is not None else c0
         b, a = band_edges(np.linalg.norm(Q - c, axis=1), sigma)
         return Primitive(self.name, {"center": m + c[0] * e1 + c[1] * e2, "normal": n,
