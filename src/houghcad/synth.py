@@ -415,7 +415,8 @@ def sample_family(name: str, rng: np.random.Generator, n: int, **shape: Any) -> 
 # Poses
 # --------------------------------------------------------------------------------------------
 
-#: How each parameter name transforms under x → s R x + t.
+#: How each parameter name transforms under x → s R x + t. A ``"family.name"`` key overrides
+#: ``"name"`` for that family (the same letter can be a length in one family, a ratio in another).
 PARAM_KINDS: dict[str, str] = {
     "point": "point",
     "axis_point": "point",
@@ -476,7 +477,7 @@ def transform_params(type: str, params: dict[str, Any], R: Array, t: Array, s: f
     t = np.asarray(t, float)
     out: dict[str, Any] = {}
     for key, val in params.items():
-        kind = PARAM_KINDS.get(key)
+        kind = PARAM_KINDS.get(f"{type}.{key}", PARAM_KINDS.get(key))
         if kind == "point":
             out[key] = (s * (R @ np.asarray(val, float)) + t).tolist()
         elif kind == "direction":
@@ -1312,3 +1313,265 @@ PARAM_KINDS.update({
 })
 PARTS.update({"generalized_cone_part": generalized_cone_part})
 __all__ += ["generalized_cone_part", "sample_generalized_cone", "sample_generalized_cylinder"]
+
+
+# --------------------------------------------------------------------------------------------
+# Helical surface, helical strip, annulus (complex families of issue 3) and the screw part
+# --------------------------------------------------------------------------------------------
+#
+# Conventions (world parameters, lengths in the cloud's units):
+#
+# - helical_surface: ``axis_point``, ``axis`` (unit), ``ref_direction`` (unit, orthogonal to the
+#   axis: the direction of φ = 0), ``R1`` < ``R2`` (smallest and largest radius), ``n`` (integer
+#   ≠ 0, its sign the handedness), ``k1`` > 0, ``k2`` (phase along the axis, in [0, 2π k1)). In
+#   the frame (ref_direction, axis × ref_direction, axis) at axis_point the surface is
+#   x = R(u) cos v, y = R(u) sin v, z = k1 (u + n v) + k2, R(u) = R1 + (R2 − R1)(cos u + 1)/2:
+#   the crests (radius R2) in the half-plane of ref_direction sit at k2 + 2π k1 m along the axis.
+# - helical_strip: ``axis_point``, ``axis``, ``ref_direction`` (the strip's ruling through
+#   axis_point points along it), ``r_inner`` < ``r_outer``, ``pitch`` (> 0, axial advance per
+#   turn), ``handedness`` (+1 right-handed, −1 left-handed): x = ρ cos v, y = ρ sin v,
+#   z = handedness · pitch/(2π) · v, r_inner ≤ ρ ≤ r_outer.
+# - annulus: ``center``, ``normal`` (unit), ``r_inner`` < ``r_outer``.
+
+
+def _helical_R(R1: float, R2: float, u: Array) -> tuple[Array, Array]:
+    """Radius R(u) = R1 + (R2 − R1)(cos u + 1)/2 and its derivative, shapes like u."""
+    return R1 + 0.5 * (R2 - R1) * (np.cos(u) + 1.0), -0.5 * (R2 - R1) * np.sin(u)
+
+
+def _helical_density(R1: float, R2: float, k1: float, starts: int, u: Array) -> Array:
+    """Area element |S_u × S_v| of the helical surface (depends on u only), shape like u."""
+    R, dR = _helical_R(R1, R2, u)
+    return np.sqrt(k1 * k1 * (starts * starts * dR * dR + R * R) + R * R * dR * dR)
+
+
+def _inverse_cdf(rng: np.random.Generator, n: int, x: Array, dens: Array) -> Array:
+    """n samples with density ∝ ``dens`` tabulated at ``x`` (piecewise linear CDF), shape (n,)."""
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(x))])
+    return np.interp(rng.random(n) * cdf[-1], cdf, x)
+
+
+def sample_helical_surface(
+    rng: np.random.Generator,
+    n: int,
+    R1: float,
+    R2: float,
+    k1: float,
+    starts: int,
+    periods: int,
+    k2: float = 0.0,
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the helical surface z = k1 (u + starts·v) + k2 (see the section header),
+    cut to the slab 0 ≤ z < periods · 2π k1 and the azimuth range ``arc`` (rad).
+
+    ``periods`` (integer) whole profile periods make every azimuth carry the same area, so v is
+    uniform; u is drawn by inverse CDF of the area element over one period, then moved by whole
+    periods into the slab. Returns points (n, 3) and outward unit normals (n, 3).
+    """
+    if not (R2 > R1 > 0 and k1 > 0 and int(starts) != 0 and int(periods) >= 1):
+        raise ValueError("helical surface needs R2 > R1 > 0, k1 > 0, starts ≠ 0, periods ≥ 1")
+    a0, a1 = _span(arc)
+    starts, periods = int(starts), int(periods)
+    v = a0 + (a1 - a0) * rng.random(n)
+    g = np.linspace(0.0, TAU, 2049)
+    s = _inverse_cdf(rng, n, g, _helical_density(R1, R2, k1, starts, g)) + TAU * rng.integers(0, periods, n)
+    # Slab condition: 0 ≤ k1 (u + starts v) + k2 < L  ⇔  u + starts v + k2/k1 ∈ [0, 2π periods).
+    lo = -starts * v - k2 / k1
+    u = lo + np.mod(s - lo, TAU * periods)  # whole periods: the density of u is unchanged
+    R, dR = _helical_R(R1, R2, u)
+    cv, sv = np.cos(v), np.sin(v)
+    pts = np.column_stack([R * cv, R * sv, k1 * (u + starts * v) + k2])
+    # −(S_u × S_v) points away from the axis.
+    nrm = -np.column_stack([k1 * (starts * dR * sv - R * cv), -k1 * (R * sv + starts * dR * cv), R * dR])
+    return pts, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+
+
+def _helical_surface_area(R1: float, R2: float, k1: float, starts: int, periods: int, k2: float = 0.0,
+                          arc: tuple[float, float] = (0.0, TAU)) -> float:
+    g = np.linspace(0.0, TAU, 4097)
+    d = _helical_density(R1, R2, k1, int(starts), g)
+    return float((arc[1] - arc[0]) * int(periods) * np.sum(0.5 * (d[1:] + d[:-1]) * np.diff(g)))
+
+
+def _helical_surface_local(R1: float, R2: float, k1: float, starts: int, k2: float = 0.0, **_: Any) -> dict[str, Any]:
+    return {"axis_point": list(_O), "axis": list(_Z), "ref_direction": [1.0, 0.0, 0.0], "R1": float(R1),
+            "R2": float(R2), "n": int(starts), "k1": float(k1), "k2": float(k2 % (TAU * k1))}
+
+
+def _helical_surface_random(rng: np.random.Generator) -> dict[str, Any]:
+    R2 = float(rng.uniform(0.7, 1.0))
+    starts = int(rng.integers(1, 4)) * (1 if rng.random() < 0.7 else -1)
+    # Profile period 0.6–0.9 R2: a few sampling neighbourhoods per period at a few thousand
+    # points, so that estimated normals still follow the flanks.
+    k1 = R2 * float(rng.uniform(0.6, 0.9)) / TAU
+    return {"R1": R2 * float(rng.uniform(0.6, 0.75)), "R2": R2, "k1": k1, "starts": starts,
+            "periods": int(rng.integers(3, 5)), "k2": float(rng.uniform(0.0, TAU * k1))}
+
+
+def sample_helical_strip(
+    rng: np.random.Generator,
+    n: int,
+    r_inner: float,
+    r_outer: float,
+    c: float,
+    v_range: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the helicoid strip x = ρ cos v, y = ρ sin v, z = c v, r_inner ≤ ρ ≤ r_outer.
+
+    The area element √(c² + ρ²) dρ dv: v uniform, ρ by inverse CDF. Returns points (n, 3) and unit
+    normals (n, 3) ∝ (c sin v, −c cos v, ρ).
+    """
+    if not (r_outer > r_inner >= 0 and c != 0):
+        raise ValueError("helical strip needs r_outer > r_inner ≥ 0 and c ≠ 0")
+    v0, v1 = _span(v_range)
+    v = v0 + (v1 - v0) * rng.random(n)
+    g = np.linspace(r_inner, r_outer, 2049)
+    rho = _inverse_cdf(rng, n, g, np.sqrt(c * c + g * g))
+    cv, sv = np.cos(v), np.sin(v)
+    pts = np.column_stack([rho * cv, rho * sv, c * v])
+    nrm = np.column_stack([c * sv, -c * cv, rho])
+    return pts, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+
+
+def _helical_strip_area(r_inner: float, r_outer: float, c: float, v_range: tuple[float, float] = (0.0, TAU)) -> float:
+    def F(r: float) -> float:  # ∫ √(c² + r²) dr
+        return 0.5 * (r * np.hypot(c, r) + c * c * np.arcsinh(r / abs(c)))
+
+    return float((v_range[1] - v_range[0]) * (F(r_outer) - F(r_inner)))
+
+
+def _helical_strip_local(r_inner: float, r_outer: float, c: float, **_: Any) -> dict[str, Any]:
+    return {"axis_point": list(_O), "axis": list(_Z), "ref_direction": [1.0, 0.0, 0.0], "r_inner": float(r_inner),
+            "r_outer": float(r_outer), "pitch": float(abs(c) * TAU), "handedness": float(np.sign(c))}
+
+
+def _helical_strip_random(rng: np.random.Generator) -> dict[str, Any]:
+    a = float(rng.uniform(0.7, 1.0))
+    c = a * float(rng.uniform(0.5, 1.0)) / TAU * (1 if rng.random() < 0.7 else -1)
+    return {"r_inner": a * float(rng.uniform(0.3, 0.6)), "r_outer": a, "c": c,
+            "v_range": (0.0, TAU * float(rng.uniform(1.0, 3.0)))}
+
+
+def sample_annulus(
+    rng: np.random.Generator,
+    n: int,
+    r_inner: float,
+    r_outer: float,
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the planar annulus r_inner ≤ ρ ≤ r_outer of z = 0 (azimuth in ``arc``).
+
+    ρ² is uniform. Returns points (n, 3) and normals (n, 3) (all +z).
+    """
+    if not r_outer > r_inner >= 0:
+        raise ValueError("annulus needs r_outer > r_inner ≥ 0")
+    a0, a1 = _span(arc)
+    rho = np.sqrt(r_inner**2 + rng.random(n) * (r_outer**2 - r_inner**2))
+    th = a0 + (a1 - a0) * rng.random(n)
+    pts = np.column_stack([rho * np.cos(th), rho * np.sin(th), np.zeros(n)])
+    nrm = np.zeros((n, 3))
+    nrm[:, 2] = 1.0
+    return pts, nrm
+
+
+def _annulus_area(r_inner: float, r_outer: float, arc: tuple[float, float] = (0.0, TAU)) -> float:
+    return float(0.5 * (arc[1] - arc[0]) * (r_outer**2 - r_inner**2))
+
+
+def _annulus_local(r_inner: float, r_outer: float, **_: Any) -> dict[str, Any]:
+    return {"center": list(_O), "normal": list(_Z), "r_inner": float(r_inner), "r_outer": float(r_outer)}
+
+
+def _annulus_random(rng: np.random.Generator) -> dict[str, Any]:
+    a = float(rng.uniform(0.6, 1.2))
+    return {"r_inner": a * float(rng.uniform(0.3, 0.7)), "r_outer": a, "arc": _partial(rng, 0.7, np.pi, 1.7 * np.pi)}
+
+
+def screw_part(
+    seed: int = 0,
+    n_points: int = 20000,
+    noise: float = 0.0,
+    pose: bool = True,
+    *,
+    outliers: float = 0.0,
+    scale: float | None = None,
+) -> SynthCloud:
+    """The screw-like part of the paper (Fig. "viteggiante"): a threaded sector between two
+    parallel helicoids.
+
+    Solid (cylindrical coordinates about z): r_b < ρ < ρ_thread(φ, z), c φ < z − z0 < c φ + h,
+    0 < φ < Φ, where ρ_thread is a helical surface of pitch c = k1 n and h a whole number of
+    thread periods, so the thread meets both helicoids along helices of one radius and the two
+    strips are equal up to a translation along the axis (by h).
+
+    Primitives (6): 0 helical surface (the thread), 1 plane φ = 0, 2 plane φ = Φ, 3 helical strip
+    (lower), 4 helical strip (upper), 5 cylinder ρ = r_b (the bore). Faces are trimmed against the
+    solid like the other parts.
+    """
+    st = _Streams.from_seed(seed, "screw_part")
+    g = st.shape
+    R2 = g.uniform(0.9, 1.1)
+    R1 = R2 * g.uniform(0.65, 0.75)
+    starts = int(g.integers(1, 3))
+    k1 = R2 * g.uniform(0.6, 0.8) / TAU
+    T = TAU * k1
+    k2 = g.uniform(0.0, T)
+    c = k1 * starts
+    h = T * int(g.integers(2, 4))
+    rb = R2 * g.uniform(0.25, 0.4)
+    Phi = np.pi * g.uniform(1.25, 1.6)
+    z0 = 0.0
+    a_edge = float(_helical_R(R1, R2, np.array((z0 - k2) / k1))[0])  # thread radius on the helicoids
+
+    def thread_rho(phi: Array, z: Array) -> Array:
+        return _helical_R(R1, R2, (z - k2) / k1 - starts * phi)[0]
+
+    def solid(p: Array) -> Array:
+        rho = _radial(p)
+        phi = np.mod(np.arctan2(p[:, 1], p[:, 0]), TAU)
+        w = p[:, 2] - z0 - c * phi
+        return (phi > 0) & (phi < Phi) & (w > 0) & (w < h) & (rho > rb) & (rho < thread_rho(phi, p[:, 2]))
+
+    periods = int(np.ceil((h + c * Phi) / T)) + 2
+    z_lo = z0 - T
+    ez = np.array([0.0, 0, 1])
+    d_end = np.array([np.cos(Phi), np.sin(Phi), 0.0])
+    plane_size = (R2 * 1.2, h * 1.2)
+    faces = [
+        _Face("thread", "helical_surface", {"R1": float(R1), "R2": float(R2), "k1": float(k1), "starts": starts,
+                                            "periods": periods, "k2": float((k2 - z_lo) % T), "arc": (0.0, float(Phi))},
+              np.eye(3), np.array([0.0, 0.0, z_lo])),
+        _Face("side φ=0", "plane", {"size": plane_size}, _frame((0, -1, 0), (1, 0, 0)), np.array([0.55 * R2, 0, z0 + h / 2])),
+        _Face("side φ=Φ", "plane", {"size": plane_size},
+              _frame(np.cross(ez, d_end), d_end), 0.55 * R2 * d_end + np.array([0, 0, z0 + c * Phi + h / 2])),
+        _Face("strip low", "helical_strip", {"r_inner": float(rb), "r_outer": a_edge, "c": float(c),
+                                             "v_range": (0.0, float(Phi))}, np.eye(3), np.array([0.0, 0.0, z0])),
+        _Face("strip high", "helical_strip", {"r_inner": float(rb), "r_outer": a_edge, "c": float(c),
+                                              "v_range": (0.0, float(Phi))}, np.eye(3), np.array([0.0, 0.0, z0 + h])),
+        _Face("bore", "cylinder", {"radius": float(rb), "height": float(h + c * Phi) * 1.1, "arc": (0.0, float(Phi))},
+              np.eye(3), np.array([0.0, 0.0, z0 + (h + c * Phi) / 2])),
+    ]
+    return _part(st, f"screw_part-{seed}", faces, solid, n_points, noise, outliers, pose, scale)
+
+
+SAMPLERS.update({
+    "helical_surface": Sampler(sample_helical_surface, _helical_surface_area, _helical_surface_local,
+                               _helical_surface_random),
+    "helical_strip": Sampler(sample_helical_strip, _helical_strip_area, _helical_strip_local, _helical_strip_random),
+    "annulus": Sampler(sample_annulus, _annulus_area, _annulus_local, _annulus_random),
+})
+PARAM_KINDS.update({
+    "ref_direction": "direction",
+    "R1": "length",
+    "R2": "length",
+    "k1": "length",
+    "k2": "length",
+    "n": "invariant",
+    "r_inner": "length",
+    "r_outer": "length",
+    "pitch": "length",
+    "handedness": "invariant",
+})
+PARTS.update({"screw_part": screw_part})
+__all__ += ["sample_helical_surface", "sample_helical_strip", "sample_annulus", "screw_part"]

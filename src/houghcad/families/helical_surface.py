@@ -1,0 +1,256 @@
+"""Helical surfaces (threads): x = R(u) cos v, y = R(u) sin v,
+z = k1 (u + n v) + k2, R(u) = R1 + (R2 − R1)(cos u + 1)/2, n ∈ ℤ \\ {0}.
+
+In cylindrical coordinates the surface is ρ = A + B cos ψ with
+ψ = (z − k2)/k1 − n φ, A = (R1 + R2)/2, B = (R2 − R1)/2: a cosine profile
+of period 2π k1 along the axis, screwed with the pitch p = k1 n (axial
+advance per radian; n is the number of thread starts, its sign the
+handedness, k1 > 0).
+
+Standard form: the axis along z through the origin, from the linear line
+complex of the normal lines (its pitch is p). Voted: (A, B, log k1) — the
+radii and the period — with n swept over 1–4 as windows of k1 around p/n,
+and the phase k2 estimated per k1 by a linear least-squares fit of the
+profile's first harmonic.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial import cKDTree
+
+from ..hough import Grid
+from .base import Frame, Family, Primitive, axis_from_normal_lines, register, tangent_basis, unit
+from ._helix import GLOBAL_COMPLEX_RESIDUAL, cylindrical, frame_axes, screw_placement
+
+TAU = 2.0 * np.pi
+MAX_STARTS = 4
+#: Half-width of each n's window of k1 around p/n (relative): the complex's
+#: pitch comes out 1–6 % low on noisy clouds (smoothed normals).
+K1_WINDOW = 0.14
+
+
+def harmonic_phase(rho: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Phase φ0 (K,) of the best fit ρ ≈ A + B cos(θ − φ0), B ≥ 0, by linear
+    least squares in (A, B cos φ0, B sin φ0) for each column of θ (m, K);
+    rho (m,)."""
+    D = np.stack([np.ones_like(theta), np.cos(theta), np.sin(theta)], axis=-1)  # (m, K, 3)
+    M = np.einsum("mki,mkj->kij", D, D) + 1e-12 * np.eye(3)
+    b = np.einsum("mki,m->ki", D, rho)
+    sol = np.linalg.solve(M, b[..., None])[..., 0]
+    return np.arctan2(sol[:, 2], sol[:, 1])
+
+
+def _profile(A, B, psi):
+    return A + B * np.cos(psi), -B * np.sin(psi)
+
+
+@register
+class HelicalSurface(Family):
+    name = "helical_surface"
+    param_names = ("axis_point", "axis", "ref_direction", "R1", "R2", "n", "k1", "k2")
+    n_unknowns = 3
+    complexity = 9
+    simple = False
+    #: Sought in the global round too, when the whole cloud's normal lines form
+    #: one linear complex: otherwise planes and cylinders take the strip's bands
+    #: there (5 noisy single instances: 0/5 recognised, 5/5 with it).
+    global_search = True
+
+    # --- standard form and voting -------------------------------------------
+    def placements(self, P, N, ctx):
+        pl, p, res = screw_placement(P, N)
+        if not ctx.local and res > GLOBAL_COMPLEX_RESIDUAL:
+            return []  # the whole cloud is not screw-invariant: leave it to the per-cluster rounds
+        Pl = pl.local(P, N)[0]
+        rho = np.hypot(Pl[:, 0], Pl[:, 1])
+        if abs(p) < 0.005 * max(float(np.median(rho)), 1e-9):
+            return []  # no screw motion
+        rng = np.random.default_rng(ctx.seed)
+        sel = np.arange(len(Pl)) if len(Pl) <= 1500 else np.sort(rng.choice(len(Pl), 1500, replace=False))
+        pl.info.update(p=p, local=Pl[sel])
+        return [pl]
+
+    @staticmethod
+    def _k1_windows(p: float) -> list[tuple[int, float, float]]:
+        """(n, k1_lo, k1_hi) for n = ±1…±MAX_STARTS (sign of p)."""
+        s = 1 if p >= 0 else -1
+        return [(s * m, abs(p) / m * (1 - K1_WINDOW), abs(p) / m * (1 + K1_WINDOW)) for m in range(1, MAX_STARTS + 1)]
+
+    def region(self, Pl, Nl, ctx):
+        p = axis_from_normal_lines(Pl, Nl)[2]  # pitch: invariant, recomputed in the local frame
+        rho = np.hypot(Pl[:, 0], Pl[:, 1])
+        lo, hi = float(np.quantile(rho, 0.01)), float(np.quantile(rho, 0.99))
+        wins = self._k1_windows(p)
+        l0, l1 = np.log(max(wins[-1][1], 1e-9)), np.log(max(wins[0][2], 2e-9))
+        nk = int(np.clip((l1 - l0) / 0.01, 8, 400))
+        span = max(hi - lo, 1e-6)
+        nr = int(np.clip(span / max(0.5 * ctx.cell, 1e-6), 12, 40))
+        return Grid((lo, 0.0, l0), (hi, 0.6 * span, l1), (nr, nr, nk))
+
+    def gamma(self, Pl, Nl, grid, ctx):
+        p = axis_from_normal_lines(Pl, Nl)[2]
+        rng = np.random.default_rng(ctx.seed)
+        sel = np.arange(len(Pl)) if len(Pl) <= 800 else np.sort(rng.choice(len(Pl), 800, replace=False))
+        X = Pl[sel]
+        rho, phi, z = np.hypot(X[:, 0], X[:, 1]), np.arctan2(X[:, 1], X[:, 0]), X[:, 2]
+        lk = grid.centers(2)
+        k1, n = [], []
+        for m, lo, hi in self._k1_windows(p):  # the sweep over n: a window of k1 each
+            kk = np.exp(lk[(lk >= np.log(lo)) & (lk <= np.log(hi))])
+            k1.append(kk)
+            n.append(np.full(len(kk), m))
+        k1, n = np.concatenate(k1), np.concatenate(n)
+        if len(k1) == 0:
+            return np.zeros(0, int), np.zeros((0, 3))
+        theta = z[:, None] / k1[None, :] - n[None, :] * phi[:, None]  # (m, K)
+        psi = theta - harmonic_phase(rho, theta)[None, :]
+        cp = np.cos(psi)
+        A = grid.centers(0)
+        # Γ_P for each k1: the line ρ = A + B cos ψ in (A, B), sampled over A's bins.
+        B = (rho[:, None, None] - A[None, None, :]) / np.where(np.abs(cp) > 0.3, cp, np.nan)[:, :, None]
+        ok = np.isfinite(B) & (B > 0) & (B < grid.upper[1])
+        vi, ki, ai = np.nonzero(ok)
+        vals = np.stack([A[ai], B[vi, ki, ai], np.log(k1[ki])], axis=1)
+        return sel[vi], vals
+
+    def primitive(self, values, placement):
+        A, B, k1 = float(values[0]), float(values[1]), float(np.exp(values[2]))
+        p = placement.info.get("p", 0.0)
+        n = int(np.sign(p)) * max(1, int(round(abs(p) / k1)))
+        X = placement.info["local"]
+        rho, phi = np.hypot(X[:, 0], X[:, 1]), np.arctan2(X[:, 1], X[:, 0])
+        phase = float(harmonic_phase(rho, (X[:, 2] / k1 - n * phi)[:, None])[0])
+        R = placement.R
+        return Primitive(self.name, {"axis_point": placement.origin.copy(), "axis": R[2].copy(),
+                                     "ref_direction": R[0].copy(), "R1": A - B, "R2": A + B, "n": n, "k1": k1,
+                                     "k2": float(np.mod(k1 * phase, TAU * k1))})
+
+    # --- geometry -----------------------------------------------------------
+    def _foot(self, prim, P, iters: int = 6):
+        """Foot of each point on the surface: Gauss–Newton on (ψ, δ) from the
+        nearest sample of the profile in the point's meridian half-plane.
+
+        Returns residual vectors in the point's meridian frame (n, 3), the
+        tangents S_ψ, S_δ there (n, 3) each, and the frame (φ (n,), e1, e2, a).
+        """
+        p = prim.params
+        A, B = 0.5 * (p["R1"] + p["R2"]), 0.5 * (p["R2"] - p["R1"])
+        k1, n = p["k1"], int(p["n"])
+        pitch = k1 * n
+        rho, phi, z, (e1, e2, a) = cylindrical(P, p["axis_point"], p["axis"], p["ref_direction"])
+        w = z - p["k2"] - pitch * phi
+        # Profile (A + B cos ψ, k1 ψ): one period and its neighbours, densely sampled.
+        per = TAU * k1
+        m = np.floor(w / per)
+        s = np.linspace(-np.pi, 3 * np.pi, 1025)
+        curve = np.stack([_profile(A, B, s)[0], k1 * s], axis=1)
+        j = cKDTree(curve).query(np.stack([rho, w - per * m], axis=1))[1]
+        psi = s[j] + TAU * m
+        dl = np.zeros_like(psi)
+        X = np.stack([rho, np.zeros_like(rho), w], axis=1)
+        for _ in range(iters):
+            r_s, dr = _profile(A, B, psi)
+            cd, sd = np.cos(dl), np.sin(dl)
+            S = np.stack([r_s * cd, r_s * sd, k1 * psi + pitch * dl], axis=1)
+            Jp = np.stack([dr * cd, dr * sd, np.full_like(psi, k1)], axis=1)
+            Jd = np.stack([-r_s * sd, r_s * cd, np.full_like(psi, pitch)], axis=1)
+            r = S - X
+            a11, a12, a22 = (Jp * Jp).sum(1), (Jp * Jd).sum(1), (Jd * Jd).sum(1)
+            g1, g2 = (Jp * r).sum(1), (Jd * r).sum(1)
+            det = a11 * a22 - a12 * a12
+            det = np.where(np.abs(det) > 1e-18, det, 1e-18)
+            psi = psi - (a22 * g1 - a12 * g2) / det
+            dl = dl - (a11 * g2 - a12 * g1) / det
+        r_s, dr = _profile(A, B, psi)
+        cd, sd = np.cos(dl), np.sin(dl)
+        S = np.stack([r_s * cd, r_s * sd, k1 * psi + pitch * dl], axis=1)
+        Jp = np.stack([dr * cd, dr * sd, np.full_like(psi, k1)], axis=1)
+        Jd = np.stack([-r_s * sd, r_s * cd, np.full_like(psi, pitch)], axis=1)
+        return S - X, Jp, Jd, (phi, e1, e2, a)
+
+    def distance(self, prim, P):
+        return np.linalg.norm(self._foot(prim, P)[0], axis=1)
+
+    def surface_normals(self, prim, P):
+        _, Jp, Jd, (phi, e1, e2, a) = self._foot(prim, P)
+        nl = unit(np.cross(Jp, Jd))  # in the meridian frame (e_ρ, e_φ, a)
+        c, s = np.cos(phi), np.sin(phi)
+        e_rho = c[:, None] * e1 + s[:, None] * e2
+        e_phi = -s[:, None] * e1 + c[:, None] * e2
+        return unit(nl[:, :1] * e_rho + nl[:, 1:2] * e_phi + nl[:, 2:] * a)
+
+    def valid(self, prim, ctx):
+        p = prim.params
+        R1, R2, k1, n = p["R1"], p["R2"], p["k1"], int(p["n"])
+        # A thread shallower than 4 % of its radius is a cylinder; a period beyond twice the
+        # radius (k1 > R2, period > 2π R2) is a bulge of a surface of revolution, not a thread.
+        return (0 < R1 < R2 < ctx.max_radius and R2 - R1 >= 0.04 * R2 and 0 < k1 <= R2
+                and 1 <= abs(n) <= MAX_STARTS + 2)
+
+    def fit(self, prim, P, N):
+        if len(P) < 16:
+            return None
+        p0 = prim.params
+        a0 = unit(p0["axis"])
+        e1, e2 = tangent_basis(a0)
+        n = int(p0["n"])
+
+        def unpack(x):
+            return unit(a0 + x[0] * e1 + x[1] * e2), p0["axis_point"] + x[2] * e1 + x[3] * e2, x[4], x[5], x[6], x[7]
+
+        def res(x):
+            a, q, A, B, k1, k2 = unpack(x)
+            rho, phi, z, _ = cylindrical(P, q, a, p0["ref_direction"])
+            psi = (z - k2) / k1 - n * phi
+            # Sampson distance: F / |∇F| for F = ρ − A − B cos ψ.
+            g = np.sqrt(1.0 + (B * np.sin(psi)) ** 2 * (1.0 / k1**2 + n * n / np.maximum(rho, 1e-9) ** 2))
+            return (rho - A - B * np.cos(psi)) / g
+
+        x0 = np.array([0, 0, 0, 0, 0.5 * (p0["R1"] + p0["R2"]), 0.5 * (p0["R2"] - p0["R1"]), p0["k1"], p0["k2"]])
+        try:
+            sol = least_squares(res, x0, method="lm", max_nfev=80)
+        except Exception:
+            return None
+        if not np.isfinite(sol.x).all():
+            return None
+        a, q, A, B, k1, k2 = unpack(sol.x)
+        if k1 < 0:  # (k1, n, ψ) → (−k1, −n, −ψ) describes the same surface
+            return None
+        if B < 0:  # ψ → ψ + π
+            B, k2 = -B, k2 + np.pi * k1
+        # Axis point at the foot of the centroid (k2 follows), reference kept orthogonal.
+        s = (P.mean(axis=0) - q) @ a
+        e1n = frame_axes(a, p0["ref_direction"])[0]
+        return Primitive(self.name, {"axis_point": q + s * a, "axis": a, "ref_direction": e1n, "R1": float(A - B),
+                                     "R2": float(A + B), "n": n, "k1": float(k1),
+                                     "k2": float(np.mod(k2 - s, TAU * k1))})
+
+    # --- output -------------------------------------------------------------
+    def to_world(self, prim, T):
+        p = prim.params
+        return {"axis_point": T.inv_points(p["axis_point"]).tolist(),
+                "axis": unit(T.inv_dirs(p["axis"])).tolist(),
+                "ref_direction": unit(T.inv_dirs(p["ref_direction"])).tolist(),
+                "R1": T.inv_length(p["R1"]), "R2": T.inv_length(p["R2"]), "n": int(p["n"]),
+                "k1": T.inv_length(p["k1"]), "k2": T.inv_length(p["k2"])}
+
+    length_descriptors = ("R1", "R2", "k1")
+    integer_descriptors = ("n",)
+
+    def descriptors(self, prim):
+        p = prim.params
+        return {"R1": float(p["R1"]), "R2": float(p["R2"]), "k1": float(p["k1"]), "n": int(p["n"])}
+
+    def frame(self, prim):
+        return Frame("line", np.asarray(prim.params["axis_point"], float), unit(prim.params["axis"]))
+
+
+def from_world(params: dict) -> Primitive:
+    """A Primitive from world-style parameters (synth's ground truth), same frame."""
+    v = {k: (np.asarray(params[k], float) if k in ("axis_point", "axis", "ref_direction") else float(params[k]))
+         for k in HelicalSurface.param_names}
+    v["n"] = int(round(v["n"]))
+    v["axis"] = unit(v["axis"])
+    return Primitive("helical_surface", v)

@@ -1,0 +1,74 @@
+"""Helical surfaces (threads): geometry against brute force, sampler, recognition in random poses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import houghcad
+from houghcad import synth
+from houghcad.families import REGISTRY
+from houghcad.families.helical_surface import from_world
+
+FAM = REGISTRY["helical_surface"]
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_distance_and_normals_on_the_sampled_surface(seed):
+    cloud = synth.single("helical_surface", seed, n_points=2000)
+    prim = from_world(cloud.primitives[0]["params"])
+    assert FAM.distance(prim, cloud.points).max() < 1e-9 * cloud.diagonal()
+    sn = FAM.surface_normals(prim, cloud.points)
+    assert np.abs(np.einsum("ij,ij->i", sn, cloud.normals)).min() > 1 - 1e-9
+
+
+def test_distance_matches_brute_force():
+    dense = synth.single("helical_surface", 4, n_points=600000, pose=False)
+    prim = from_world(dense.primitives[0]["params"])
+    z = dense.points[:, 2]
+    mid = dense.points[np.abs(z - np.median(z)) < 0.2 * np.ptp(z)][:300]  # away from the patch's ends
+    rng = np.random.default_rng(1)
+    X = mid + rng.normal(0, 0.02, mid.shape)
+    d = FAM.distance(prim, X)
+    ref, _ = cKDTree(dense.points).query(X)
+    area = synth.SAMPLERS["helical_surface"].area(
+        **synth.SAMPLERS["helical_surface"].random_shape(synth._Streams.from_seed(4, "helical_surface").shape))
+    spacing = np.sqrt(area / len(dense.points))
+    assert np.all(d <= ref + 1e-9)  # the brute-force sample only over-estimates
+    assert np.all(ref - d <= 1.5 * spacing)
+
+
+def test_world_parameters_describe_the_sampled_surface():
+    # k2 is the crest's axial offset in the half-plane of ref_direction: moving
+    # axis_point along the axis by k2 puts a crest (radius R2) there.
+    cloud = synth.single("helical_surface", 5, n_points=500)
+    p = cloud.primitives[0]["params"]
+    crest = np.asarray(p["axis_point"]) + p["k2"] * np.asarray(p["axis"]) + p["R2"] * np.asarray(p["ref_direction"])
+    assert FAM.distance(from_world(p), crest[None])[0] < 1e-9 * cloud.diagonal()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_recognised_in_random_pose(seed):
+    cloud = synth.single("helical_surface", seed, n_points=4000, noise=0.005, missing=0.1)
+    gt = cloud.primitives[0]["params"]
+    res = houghcad.segment(cloud.points, families="all", seed=0)
+    segs = [s for s in res.segments if s.type == "helical_surface"]
+    assert segs, [s.type for s in res.segments]
+    s = max(segs, key=lambda s: len(s.indices))
+    dsc = 2 * np.sum(cloud.labels[s.indices] == 0) / (len(s.indices) + len(cloud.points))
+    assert dsc >= 0.9
+    assert s.params["n"] == int(gt["n"])
+    for k in ("R1", "R2", "k1"):
+        assert abs(s.params[k] - gt[k]) <= 0.02 * gt[k], k
+    assert s.mfe <= 0.01
+    d = FAM.distance(from_world(s.params), cloud.points)
+    assert np.median(d) < 2 * cloud.sigma
+
+
+@pytest.mark.parametrize("family,seed", [("cylinder", 0), ("sphere", 1)])
+def test_simple_singles_stay_simple(family, seed):
+    cloud = synth.single(family, seed, n_points=3000, noise=0.005)
+    res = houghcad.segment(cloud.points, families="all", seed=0)
+    big = max(res.segments, key=lambda s: len(s.indices))
+    assert big.type == family
