@@ -59,6 +59,9 @@ def cone_directrix_frame(P: np.ndarray, N: np.ndarray, iters: int = 4):
         return None
     th, rho = np.arctan2(W[:, 1], W[:, 0]), np.hypot(W[:, 0], W[:, 1])
     p, _ = polar_fit(th, rho, n)
+    if abs(p[0]) < 1e-12 or np.hypot(p[1], p[2]) / abs(p[0]) < 0.5 * B_MIN:
+        # A circular cone (or no directrix): valid() would reject every peak.
+        return None
     phi = float(np.arctan2(p[2], p[1]) / n)
     return apex, phase_frame(R, phi), int(n)
 

@@ -28,6 +28,7 @@ from .cylinder import axis_candidates
 N_VALUES = tuple(range(2, 13))
 #: Below this |b| the surface is a circular cylinder (or cone): left to the simple family.
 B_MIN = 0.03
+_MAX_ORDER_POINTS = 800
 #: Largest b voted or accepted (b → 1 makes ρ unbounded).
 B_MAX = 0.6
 
@@ -151,6 +152,9 @@ def best_order(Q: np.ndarray, c0: np.ndarray, trim: bool = True):
     """
     if len(Q) < 10:
         return None
+    if len(Q) > _MAX_ORDER_POINTS:
+        # 11 orders x 12 centre iterations: a regular subsample fixes the shape as well.
+        Q = Q[np.linspace(0, len(Q) - 1, _MAX_ORDER_POINTS).astype(np.int64)]
     best = None
     for n in N_VALUES:
         c, p, res = directrix_centre(Q, n, c0)
@@ -256,6 +260,10 @@ class GeneralizedCylinder(Family):
             if fit is None:
                 continue
             n, c, a, b, phi, _ = fit
+            if b < 0.5 * B_MIN:
+                # A circle (a cylinder) or no directrix at all: valid() would
+                # reject every peak, so skip the vote.
+                continue
             Rp = phase_frame(R, phi)
             out.append(DirectrixPlacement(Rp, R.T @ np.array([c[0], c[1], 0.0]), {"n": int(n), "a": a, "b": b}))
         return out
