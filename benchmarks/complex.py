@@ -43,7 +43,7 @@ BENCHMARKS_MD = REPO_ROOT / "BENCHMARKS.md"
 KEY_PARAMS: dict[str, tuple[str, ...]] = {
     "ellipsoid": ("semi_axes",),
     "generalized_cylinder": ("a", "b", "n"),
-    "generalized_cone": ("a", "slope", "b", "n"),
+    "generalized_cone": ("a", "b", "n"),
     "surface_of_revolution": (),  # the profile's own parameters, see _keys
     "helical_surface": ("R1", "R2", "n", "k1"),
     "helical_strip": ("r_inner", "r_outer", "pitch"),

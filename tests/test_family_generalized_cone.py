@@ -50,7 +50,7 @@ def test_recognised_in_random_poses(seed):
     assert 2 * len(truth & got) / (len(truth) + len(got)) >= 0.9
     gt = c.primitives[0]["params"]
     assert s.params["n"] == int(round(gt["n"]))
-    assert abs(s.params["slope"] / gt["slope"] - 1) < 0.02
+    assert abs(s.params["a"] / gt["a"] - 1) < 0.02
     assert abs(s.params["b"] / gt["b"] - 1) < 0.02
     assert np.linalg.norm(np.subtract(s.params["apex"], gt["apex"])) < 0.02 * c.diagonal()
     assert np.dot(s.params["axis"], gt["axis"]) > np.cos(np.radians(1.0))

@@ -68,13 +68,13 @@ def test_order_and_centre_from_the_polar_fit(n):
 def test_to_world_maps_lengths_points_and_directions():
     fam = REGISTRY[FAM]
     prim = Primitive(FAM, {"axis_point": np.array([0.1, 0.0, 0.2]), "axis": np.array([0, 0, 1.0]),
-                           "ref_dir": np.array([1.0, 0, 0]), "a": 0.3, "b": 0.1, "n": 4})
+                           "ref_direction": np.array([1.0, 0, 0]), "a": 0.3, "b": 0.1, "n": 4})
     R = synth.random_rotation(np.random.default_rng(1))
     T = Similarity(center=np.array([1.0, 2.0, 3.0]), R=R, scale=0.5)
     w = fam.to_world(prim, T)
     assert np.isclose(w["a"], 0.6) and w["b"] == 0.1 and w["n"] == 4
     assert np.allclose(w["axis_point"], T.inv_points(prim.params["axis_point"]))
-    assert np.allclose(w["ref_dir"], R[0]) and np.allclose(w["axis"], R[2])
+    assert np.allclose(w["ref_direction"], R[0]) and np.allclose(w["axis"], R[2])
 
 
 def test_valid_rejects_a_circular_cylinder():
@@ -83,7 +83,7 @@ def test_valid_rejects_a_circular_cylinder():
     class Ctx:
         max_radius = 1.0
 
-    base = {"axis_point": np.zeros(3), "axis": np.array([0, 0, 1.0]), "ref_dir": np.array([1.0, 0, 0]),
+    base = {"axis_point": np.zeros(3), "axis": np.array([0, 0, 1.0]), "ref_direction": np.array([1.0, 0, 0]),
             "a": 0.5, "n": 5}
     assert not fam.valid(Primitive(FAM, {**base, "b": 0.01}), Ctx)
     assert fam.valid(Primitive(FAM, {**base, "b": 0.1}), Ctx)
@@ -111,9 +111,9 @@ def test_recognised_in_random_poses(seed):
     assert _angle(s.params["axis"], gt["axis"]) < 1.0
     assert s.mfe <= 0.01
     # Same phase up to the n-fold symmetry: the reference directions differ by a multiple of 2π/n.
-    e1 = np.asarray(gt["ref_dir"])
+    e1 = np.asarray(gt["ref_direction"])
     e2 = np.cross(np.asarray(gt["axis"]), e1)
-    ang = np.arctan2(np.dot(s.params["ref_dir"], e2), np.dot(s.params["ref_dir"], e1)) * gt["n"]
+    ang = np.arctan2(np.dot(s.params["ref_direction"], e2), np.dot(s.params["ref_direction"], e1)) * gt["n"]
     assert abs(np.angle(np.exp(1j * ang))) < np.radians(3.0) * gt["n"]
 
 

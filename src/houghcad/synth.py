@@ -1123,7 +1123,7 @@ if __name__ == "__main__":  # python -m houghcad.synth regenerates the bundled d
 # --------------------------------------------------------------------------------------------
 #
 # Directrix (local frame, phase 0): ρ(u) = a / (1 + b cos(order·u)), the point ρ(u)(cos u, sin u).
-# The reference direction ``ref_dir`` is local x (u = 0, a point of smallest radius a / (1 + b)).
+# The reference direction ``ref_direction`` is local x (u = 0, a point of smallest radius a / (1 + b)).
 # Shape keyword ``order`` is the paper's n (the samplers' second argument is the point count).
 
 
@@ -1218,12 +1218,12 @@ def _gcone_area(slope: float, b: float, order: int, z_range: tuple[float, float]
 
 
 def _gcyl_local(a: float, b: float, order: int, **_: Any) -> dict[str, Any]:
-    return {"axis_point": list(_O), "axis": list(_Z), "ref_dir": [1.0, 0.0, 0.0], "a": float(a), "b": float(b),
+    return {"axis_point": list(_O), "axis": list(_Z), "ref_direction": [1.0, 0.0, 0.0], "a": float(a), "b": float(b),
             "n": int(order)}
 
 
 def _gcone_local(slope: float, b: float, order: int, **_: Any) -> dict[str, Any]:
-    return {"apex": list(_O), "axis": list(_Z), "ref_dir": [1.0, 0.0, 0.0], "slope": float(slope), "b": float(b),
+    return {"apex": list(_O), "axis": list(_Z), "ref_direction": [1.0, 0.0, 0.0], "a": float(slope), "b": float(b),
             "n": int(order), "A": 1.0, "B": 0.0}
 
 
@@ -1303,11 +1303,11 @@ SAMPLERS.update({
     "generalized_cone": Sampler(sample_generalized_cone, _gcone_area, _gcone_local, _gcone_random),
 })
 PARAM_KINDS.update({
-    "ref_dir": "direction",
+    "ref_direction": "direction",
     "a": "length",  # generalised cylinder: directrix size
     "b": "invariant",
     "n": "invariant",
-    "slope": "invariant",  # generalised cone: the paper's a with A = 1
+    "generalized_cone.a": "invariant",  # the paper's a with A = 1: ρ/z, no unit
     "A": "invariant",
     "B": "length",
 })

@@ -109,7 +109,7 @@ def ruling_foot(q: np.ndarray, s: float, b: float, n: int, iters: int = 5) -> np
 @register
 class GeneralizedCone(Family):
     name = "generalized_cone"
-    param_names = ("apex", "axis", "ref_dir", "slope", "b", "n", "A", "B")
+    param_names = ("apex", "axis", "ref_direction", "a", "b", "n", "A", "B")
     n_unknowns = 2
     complexity = 7
     simple = False
@@ -152,20 +152,20 @@ class GeneralizedCone(Family):
 
     def primitive(self, values, placement):
         return Primitive(self.name, {"apex": placement.origin.copy(), "axis": placement.R[2].copy(),
-                                     "ref_dir": placement.R[0].copy(), "slope": float(values[2]),
+                                     "ref_direction": placement.R[0].copy(), "a": float(values[2]),
                                      "b": float(values[1]), "n": int(round(values[0]))})
 
     # --- geometry ------------------------------------------------------------------------
     def _local(self, prim, P):
-        e1, e2, ax = ref_basis(prim.params["axis"], prim.params["ref_dir"])
+        e1, e2, ax = ref_basis(prim.params["axis"], prim.params["ref_direction"])
         v = P - prim.params["apex"]
         return np.stack([v @ e1, v @ e2, v @ ax], axis=1), (e1, e2, ax)
 
     def distance(self, prim, P):
         p = prim.params
         q, _ = self._local(prim, P)
-        u = ruling_foot(q, p["slope"], p["b"], p["n"])
-        D, _ = _rulings(u, p["slope"], p["b"], p["n"])
+        u = ruling_foot(q, p["a"], p["b"], p["n"])
+        D, _ = _rulings(u, p["a"], p["b"], p["n"])
         Dh = unit(D)
         along = np.einsum("ij,ij->i", q, Dh)
         return np.where(along > 0, np.linalg.norm(np.cross(q, Dh), axis=1), np.linalg.norm(q, axis=1))
@@ -173,20 +173,20 @@ class GeneralizedCone(Family):
     def surface_normals(self, prim, P):
         p = prim.params
         q, (e1, e2, ax) = self._local(prim, P)
-        u = ruling_foot(q, p["slope"], p["b"], p["n"])
-        D, D1 = _rulings(u, p["slope"], p["b"], p["n"])
+        u = ruling_foot(q, p["a"], p["b"], p["n"])
+        D, D1 = _rulings(u, p["a"], p["b"], p["n"])
         m = unit(np.cross(D1, D))
         return unit(m[:, :1] * e1 + m[:, 1:2] * e2 + m[:, 2:] * ax)
 
     def valid(self, prim, ctx):
         p = prim.params
-        return (np.tan(np.radians(2.0)) < p["slope"] < np.tan(np.radians(85.0)) and B_MIN <= p["b"] <= B_MAX
+        return (np.tan(np.radians(2.0)) < p["a"] < np.tan(np.radians(85.0)) and B_MIN <= p["b"] <= B_MAX
                 and p["n"] in N_VALUES)
 
     def fit(self, prim, P, N):
         p0 = prim.params
         n = int(p0["n"])
-        e1, e2, a0 = ref_basis(p0["axis"], p0["ref_dir"])
+        e1, e2, a0 = ref_basis(p0["axis"], p0["ref_direction"])
 
         def unpack(x):
             return p0["apex"] + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5], x[6], x[7]
@@ -200,7 +200,7 @@ class GeneralizedCone(Family):
             g = 1.0 + b * np.cos(n * th)
             return sampson(rho * g - s * Z, g**2 + (b * n * np.sin(n * th)) ** 2 + s * s)
 
-        x0 = np.array([0, 0, 0, 0, 0, p0["slope"], p0["b"], 0.0])
+        x0 = np.array([0, 0, 0, 0, 0, p0["a"], p0["b"], 0.0])
         try:
             sol = least_squares(res, x0, method="lm", max_nfev=80)
         except Exception:
@@ -215,22 +215,22 @@ class GeneralizedCone(Family):
         v = P - apex
         b = debias_b(b, n, sol.fun, np.hypot(v @ f1, v @ f2))
         ref = np.cos(phi) * f1 + np.sin(phi) * f2
-        return Primitive(self.name, {"apex": apex, "axis": ax, "ref_dir": ref, "slope": float(s), "b": float(b),
+        return Primitive(self.name, {"apex": apex, "axis": ax, "ref_direction": ref, "a": float(s), "b": float(b),
                                      "n": n})
 
     # --- output --------------------------------------------------------------------------
     def to_world(self, prim, T):
         p = prim.params
-        e1, _, ax = ref_basis(p["axis"], p["ref_dir"])
+        e1, _, ax = ref_basis(p["axis"], p["ref_direction"])
         return {"apex": T.inv_points(p["apex"]).tolist(), "axis": unit(T.inv_dirs(ax)).tolist(),
-                "ref_dir": unit(T.inv_dirs(e1)).tolist(), "slope": float(p["slope"]), "b": float(p["b"]),
+                "ref_direction": unit(T.inv_dirs(e1)).tolist(), "a": float(p["a"]), "b": float(p["b"]),
                 "n": int(p["n"]), "A": 1.0, "B": 0.0}
 
     integer_descriptors = ("n",)
 
     def descriptors(self, prim):
         p = prim.params
-        return {"slope": float(p["slope"]), "b": float(p["b"]), "n": int(p["n"])}
+        return {"a": float(p["a"]), "b": float(p["b"]), "n": int(p["n"])}
 
     def frame(self, prim):
         return Frame("point", np.asarray(prim.params["apex"], float), unit(prim.params["axis"]), oriented=True)

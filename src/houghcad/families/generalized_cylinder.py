@@ -233,7 +233,7 @@ def vote_grid(n: int, rho_hi: float, cell: float, rho_typ: float) -> Grid:
 @register
 class GeneralizedCylinder(Family):
     name = "generalized_cylinder"
-    param_names = ("axis_point", "axis", "ref_dir", "a", "b", "n")
+    param_names = ("axis_point", "axis", "ref_direction", "a", "b", "n")
     n_unknowns = 2
     complexity = 6
     simple = False
@@ -294,13 +294,13 @@ class GeneralizedCylinder(Family):
     def primitive(self, values, placement):
         n = int(round(values[0]))
         return Primitive(self.name, {"axis_point": placement.origin.copy(), "axis": placement.R[2].copy(),
-                                     "ref_dir": placement.R[0].copy(), "a": float(values[2]),
+                                     "ref_direction": placement.R[0].copy(), "a": float(values[2]),
                                      "b": float(values[1]), "n": n})
 
     # --- geometry ------------------------------------------------------------------------
     def _section(self, prim, P):
         """2-D coordinates (m, 2) in the cross-section frame, and that frame."""
-        e1, e2, ax = ref_basis(prim.params["axis"], prim.params["ref_dir"])
+        e1, e2, ax = ref_basis(prim.params["axis"], prim.params["ref_direction"])
         v = P - prim.params["axis_point"]
         return np.stack([v @ e1, v @ e2], axis=1), (e1, e2, ax)
 
@@ -326,7 +326,7 @@ class GeneralizedCylinder(Family):
     def fit(self, prim, P, N):
         p0 = prim.params
         n = int(p0["n"])
-        e1, e2, a0 = ref_basis(p0["axis"], p0["ref_dir"])
+        e1, e2, a0 = ref_basis(p0["axis"], p0["ref_direction"])
         c0 = p0["axis_point"]
 
         def unpack(x):
@@ -356,15 +356,15 @@ class GeneralizedCylinder(Family):
         b = debias_b(b, n, sol.fun, np.hypot(v @ f1, v @ f2))
         ref = np.cos(phi) * f1 + np.sin(phi) * f2
         h = (P.mean(axis=0) - c) @ ax
-        return Primitive(self.name, {"axis_point": c + h * ax, "axis": ax, "ref_dir": ref, "a": float(a),
+        return Primitive(self.name, {"axis_point": c + h * ax, "axis": ax, "ref_direction": ref, "a": float(a),
                                      "b": float(b), "n": n})
 
     # --- output --------------------------------------------------------------------------
     def to_world(self, prim, T):
         p = prim.params
-        e1, _, ax = ref_basis(p["axis"], p["ref_dir"])
+        e1, _, ax = ref_basis(p["axis"], p["ref_direction"])
         return {"axis_point": T.inv_points(p["axis_point"]).tolist(), "axis": unit(T.inv_dirs(ax)).tolist(),
-                "ref_dir": unit(T.inv_dirs(e1)).tolist(), "a": T.inv_length(p["a"]), "b": float(p["b"]),
+                "ref_direction": unit(T.inv_dirs(e1)).tolist(), "a": T.inv_length(p["a"]), "b": float(p["b"]),
                 "n": int(p["n"])}
 
     length_descriptors = ("a",)
