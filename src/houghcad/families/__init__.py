@@ -9,6 +9,7 @@ from __future__ import annotations
 from ..errors import InputError
 from .base import REGISTRY, Family, Frame, Placement, Primitive, register
 from . import plane, cylinder, sphere, cone, torus  # noqa: F401  (registration)
+from . import ellipsoid, revolution  # noqa: F401  (registration; complex families of issue 3)
 
 SIMPLE = ("plane", "cylinder", "cone", "sphere", "torus")
 
