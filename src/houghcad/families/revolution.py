@@ -511,20 +511,48 @@ class SurfaceOfRevolution(Family):
         u_ref = [self.foot(prim, P)[0]]
         if not np.all(np.isfinite(u_ref[0])):
             return None
+        state: dict[str, Any] = {}
 
         def res(x):
-            u, sd, _, _ = self.foot(unpack(x), P, u0=u_ref[0], newton=3)
+            pr = unpack(x)
+            u, sd, _, nrm = self.foot(pr, P, u0=u_ref[0], newton=3)
             u_ref[0] = u
+            state.update(x=x.copy(), u=u, nrm=nrm)
             return np.where(np.isfinite(sd), sd, 1e3)
+
+        def jac(x):
+            # At the foot the distance's gradient is n̂ · (∂q/∂x − ∂c/∂x) (the
+            # foot's own motion is tangent): rigid parameters move the point's
+            # meridian coordinates q, profile parameters the curve c at fixed u.
+            if "x" not in state or not np.array_equal(state["x"], x):
+                res(x)
+            u, nrm = state["u"], state["nrm"]
+            pr = unpack(x)
+            h0, r0, _ = radial(P, pr.params["axis_point"], pr.params["axis"])
+            th = pr.params["theta"]
+            c0 = prof.curve(u, th)
+            J = np.empty((len(P), len(x)))
+            d = 1e-6
+            for j in range(len(x)):
+                xe = x.copy()
+                xe[j] += d
+                if j < 5:
+                    pe = unpack(xe)
+                    h1, r1, _ = radial(P, pe.params["axis_point"], pe.params["axis"])
+                    J[:, j] = (nrm[:, 0] * (r1 - r0) + nrm[:, 1] * (h1 - h0)) / d
+                else:
+                    te = th.copy()
+                    te[j - 5] += d
+                    dc = (prof.curve(u, te) - c0) / d
+                    J[:, j] = -(nrm[:, 0] * dc[0] + nrm[:, 1] * dc[1])
+            return np.where(np.isfinite(J), J, 0.0)
 
         x0 = np.zeros(5 + len(th0))
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=20 * len(x0))
+            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=30 * len(x0))
         except Exception:
             return None
-        out = unpack(sol.x)
-        # Re-centre the axis point on the cluster's foot of the axis (keeps z₀ meaning).
-        return out
+        return unpack(sol.x)
 
     # --- output -------------------------------------------------------------------
     def to_world(self, prim, T):
