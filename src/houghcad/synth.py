@@ -1147,20 +1147,22 @@ def sample_ellipsoid(
 
     ``polar_range`` (rad) bounds the angle from +z of the unit-sphere point s that maps to
     x = e ∘ s, ``arc`` its azimuth. The map's area factor e0 e1 e2 |s / e| is honoured by importance
-    resampling without replacement from a pool of 30 n uniform sphere points (the factor varies by
-    at most max(e) / min(e), so the pool is far larger than needed). Returns points (n, 3) and
-    outward unit normals (n, 3).
+    resampling without replacement from a pool of 10 n uniform sphere points (the factor varies by
+    at most max(e) / min(e), so the pool is far larger than needed; weighted sampling without
+    replacement by the keys U^(1/w), Efraimidis–Spirakis). Returns points (n, 3) and outward unit
+    normals (n, 3).
     """
     e = np.asarray(semi_axes, float)
     p0, p1 = _span(polar_range)
     a0, a1 = _span(arc)
-    m = 30 * int(n)
+    m = 10 * int(n)
     u = np.cos(p1) + (np.cos(p0) - np.cos(p1)) * rng.random(m)
     th = a0 + (a1 - a0) * rng.random(m)
     rho = np.sqrt(np.clip(1.0 - u * u, 0.0, None))
     S = np.column_stack([rho * np.cos(th), rho * np.sin(th), u])
     w = np.linalg.norm(S / e, axis=1)
-    pick = rng.choice(m, int(n), replace=False, p=w / w.sum())
+    keys = np.log(rng.random(m)) / w
+    pick = np.argpartition(-keys, int(n) - 1)[: int(n)] if n < m else np.arange(m)
     S = S[pick]
     nrm = S / e
     return S * e, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
