@@ -226,6 +226,11 @@ class Ellipsoid(Family):
         foot, _ = ellipsoid_foot(self._local(prim, P), e)
         return unit((foot / (e * e)) @ prim.params["axes"])
 
+    def well_determined(self, prim, P, ctx):
+        # Global round: cones and tori are not voted there; leave them the
+        # surfaces they explain as well (the per-cluster rounds compare all).
+        return not covered_by_simple(self, prim, P, ctx)
+
     def valid(self, prim, ctx):
         e = np.asarray(prim.params["semi_axes"], float)
         if not (np.all(np.isfinite(e)) and e.min() > 0 and e.max() < 2.0 * ctx.max_radius):
@@ -290,3 +295,62 @@ class Ellipsoid(Family):
 
     def frame(self, prim):
         return Frame("point", np.asarray(prim.params["center"], float), unit(self.axis(prim)))
+
+
+# --- the simpler families' shadow fits (global round) ------------------------------
+
+def simple_fit_errors(P: np.ndarray, N: np.ndarray) -> dict[str, float]:
+    """Mean distance of points P (n, 3) (unit normals N) to the sphere, cone and
+    torus fitted to them from their standard-form estimates (no vote): what
+    the simpler rotational families would explain, had they been voted.
+
+    Used by the complex families in the global round, where cones and tori
+    are not voted, so that a complex family does not take their surfaces.
+    """
+    from .base import REGISTRY, lines_intersection
+    from .cone import cone_frame
+    from .torus import torus_frame
+
+    out: dict[str, float] = {}
+    c, cond = lines_intersection(P, N)
+    if cond > 1e-6:
+        prims = [("sphere", Primitive("sphere", {"center": c, "radius": float(np.linalg.norm(P - c, axis=1).mean())}))]
+    else:
+        prims = []
+    fr = cone_frame(P, N)
+    if fr is not None:
+        apex, a = fr
+        h, rho, _ = radial(P, apex, a)
+        prims.append(("cone", Primitive("cone", {"apex": apex, "axis": a,
+                                                 "half_angle": float(np.arctan2(rho.mean(), max(h.mean(), 1e-9)))})))
+    ct, at, R0 = torus_frame(P, N)
+    h, rho, _ = radial(P, ct, at)
+    prims.append(("torus", Primitive("torus", {"center": ct, "axis": at, "major_radius": float(abs(R0)),
+                                               "minor_radius": float(np.hypot(rho - abs(R0), h).mean())})))
+    for name, pr in prims:
+        fam = REGISTRY[name]
+        try:
+            fit = fam.fit(pr, P, N)
+        except Exception:
+            fit = None
+        if fit is not None:
+            d = fam.distance(fit, P)
+            if np.all(np.isfinite(d)):
+                out[name] = float(d.mean())
+    return out
+
+
+def covered_by_simple(fam: Family, prim: Primitive, P: np.ndarray, ctx) -> bool:
+    """Whether a sphere, cone or torus fits the segment P about as well as the
+    complex primitive ``prim`` (mean distance within 5 % + 0.05 tau: on the
+    complex family's own surfaces the simple ones stay ≥ 1.3 σ off)."""
+    if ctx.pre is None or len(P) < 10:
+        return False
+    _, j = ctx.pre.tree.query(P)
+    N = ctx.pre.normals[j]
+    rng = np.random.default_rng(ctx.seed)
+    sel = np.arange(len(P)) if len(P) <= 800 else rng.choice(len(P), 800, replace=False)
+    P, N = P[sel], N[sel]
+    d_cplx = float(fam.distance(prim, P).mean())
+    errs = simple_fit_errors(P, N)
+    return any(e <= 1.05 * d_cplx + 0.05 * ctx.tau for e in errs.values())

@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
+from .ellipsoid import covered_by_simple
 
 
 # --- profiles -------------------------------------------------------------------
@@ -487,6 +488,11 @@ class SurfaceOfRevolution(Family):
     def surface_normals(self, prim, P):
         _, _, rad, nrm = self.foot(prim, P)
         return unit(rad * nrm[:, :1] + nrm[:, 1:] * np.asarray(prim.params["axis"])[None, :])
+
+    def well_determined(self, prim, P, ctx):
+        # Global round: cones and tori are not voted there; leave them the
+        # surfaces they explain as well (the per-cluster rounds compare all).
+        return not covered_by_simple(self, prim, P, ctx)
 
     def valid(self, prim, ctx):
         prof = PROFILES.get(prim.params["profile"])
