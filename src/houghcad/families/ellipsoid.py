@@ -235,7 +235,8 @@ class Ellipsoid(Family):
         e = np.asarray(prim.params["semi_axes"], float)
         if not (np.all(np.isfinite(e)) and e.min() > 0 and e.max() < 2.0 * ctx.max_radius):
             return False
-        return (e.max() - e.min()) / e.max() > SPHERE_TOL
+        # A pancake (min/max < 0.05) is a disc: the plane covers it.
+        return SPHERE_TOL < (e.max() - e.min()) / e.max() and e.min() > 0.05 * e.max()
 
     def fit(self, prim, P, N):
         c0 = np.asarray(prim.params["center"], float)
