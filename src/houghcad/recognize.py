@@ -285,6 +285,13 @@ def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candi
 def _better(a: Candidate, b: Candidate) -> bool:
     """Whether candidate a should replace b for the same points."""
     ca, cb = a.family.complexity, b.family.complexity
+    if ca == cb and not (a.family.simple and b.family.simple):
+        # Two complex candidates (several profiles, placements): a small piece
+        # fitted marginally better must not replace one explaining far more.
+        def covers(x: Candidate, y: Candidate) -> bool:
+            return len(x.indices) >= 1.5 * len(y.indices) and x.mfe <= 1.25 * y.mfe
+        if covers(a, b) or covers(b, a):
+            return covers(a, b)
     if ca == cb:
         return (a.mfe, -len(a.indices)) < (b.mfe, -len(b.indices))
     simple, cplx = (a, b) if ca < cb else (b, a)

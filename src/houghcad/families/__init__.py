@@ -11,6 +11,7 @@ from .base import REGISTRY, Family, Frame, Placement, Primitive, register
 from . import plane, cylinder, sphere, cone, torus  # noqa: F401  (registration)
 from . import generalized_cylinder, generalized_cone  # noqa: F401  (registration)
 from . import helical_surface, helical_strip, annulus  # noqa: F401  (registration)
+from . import ellipsoid, revolution  # noqa: F401  (registration; complex families of issue 3)
 
 SIMPLE = ("plane", "cylinder", "cone", "sphere", "torus")
 
