@@ -9,6 +9,7 @@ from __future__ import annotations
 from ..errors import InputError
 from .base import REGISTRY, Family, Frame, Placement, Primitive, register
 from . import plane, cylinder, sphere, cone, torus  # noqa: F401  (registration)
+from .parametric import ParametricFamily, define_family, unregister_family, user_families  # noqa: F401
 
 SIMPLE = ("plane", "cylinder", "cone", "sphere", "torus")
 
