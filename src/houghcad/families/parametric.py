@@ -438,7 +438,7 @@ class ParametricFamily(Family):
         if self.samples is not None:
             nu, nv = self.samples
         else:
-            nu = nv = {3: 40, 2: 10}.get(len(self.solved), 4)
+            nu = nv = 10 if len(self.solved) == 2 else 4
         spans = [self._span(0, extent), self._span(1, extent)]
         g = []
         for (lo, hi), n in zip(spans, (nu, nv)):
@@ -915,8 +915,10 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
         ``f(P, N) -> (R, origin)`` (or a list of such pairs) in the cloud's
         standard frame, R's rows the local axes.
     samples : (n_u, n_v), optional
-        (u, v) samples per point and swept value in the vote (default 40 × 40
-        when three parameters are solved, 12 × 12 for two, 6 × 6 for one).
+        (u, v) samples per point in the vote: the starting lattice refined
+        adaptively when three parameters are solved (default 16 × 16), the
+        Newton starts otherwise (default 10 × 10 with two solved, 4 × 4 with
+        one).
     valid : callable, optional
         ``valid({param: value}) -> bool`` on standard-frame values; rejects
         degenerate shapes a simpler family covers.
