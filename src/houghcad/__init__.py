@@ -7,7 +7,7 @@ from .result import Result, Segment
 
 __version__ = "0.1.0"
 
-__all__ = ["InputError", "Result", "Segment", "segment", "Segmenter", "read_points", "__version__"]
+__all__ = ["InputError", "Result", "Segment", "segment", "Segmenter", "read_points", "define_family", "__version__"]
 
 
 def __getattr__(name: str):
@@ -16,6 +16,10 @@ def __getattr__(name: str):
         from . import pipeline
 
         return getattr(pipeline, name)
+    if name == "define_family":
+        from .families import define_family
+
+        return define_family
     if name == "read_points":
         from .io import read_points
 

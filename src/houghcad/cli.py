@@ -87,6 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="result file (default: <input stem>_segments.json in the current directory)")
     p.add_argument("--families", default="simple", metavar="LIST",
                    help="'simple', 'all' or comma-separated names, e.g. plane,cylinder (default: simple)")
+    p.add_argument("--family-file", action="append", default=[], metavar="FILE.py",
+                   help="run a Python file that defines families with houghcad.define_family before segmenting "
+                   "(repeatable; it runs unsandboxed: only files you trust); name them in --families")
     p.add_argument("--epsilon", type=_fraction, default=None, metavar="F",
                    help="distance tolerance as a fraction of the bounding-box diagonal, below 0.5 "
                    "(default: from the point spacing and the estimated noise)")
@@ -244,6 +247,28 @@ def _print(text: str, quiet: bool) -> None:
         print(text)
 
 
+def _load_family_files(paths: Sequence[str]) -> None:
+    """Run each user file (as ``python FILE`` would) so that its
+    ``houghcad.define_family`` calls register families; any failure is a
+    one-line InputError."""
+    import importlib.util
+
+    for i, text in enumerate(paths):
+        path = Path(text)
+        if not path.is_file():
+            raise InputError(f"{path}: no such family file")
+        spec = importlib.util.spec_from_file_location(f"houghcad_user_families_{i}", path)
+        if spec is None or spec.loader is None:
+            raise InputError(f"{path}: cannot load family file (not a Python file)")
+        module = importlib.util.module_from_spec(spec)
+        try:
+            spec.loader.exec_module(module)
+        except InputError as exc:
+            raise InputError(f"{path}: {exc}") from None
+        except Exception as exc:  # the user's code: any error is bad input
+            raise InputError(f"{path}: cannot load family file ({type(exc).__name__}: {exc})") from None
+
+
 # --------------------------------------------------------------------------- commands
 
 
@@ -254,6 +279,11 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 
     views = {flag: Path(getattr(args, flag)) if getattr(args, flag) else None for flag in ("ply", "png", "report")}
 
+    if args.family_file:
+        from .families import select
+
+        _load_family_files(args.family_file)
+        select(args.families)  # unknown names fail now, not after reading the cloud
     cloud = read_points(inp)
     _check_output(out, [inp])
     if prim is not None:

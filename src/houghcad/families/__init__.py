@@ -12,6 +12,7 @@ from . import plane, cylinder, sphere, cone, torus  # noqa: F401  (registration)
 from . import generalized_cylinder, generalized_cone  # noqa: F401  (registration)
 from . import helical_surface, helical_strip, annulus  # noqa: F401  (registration)
 from . import ellipsoid, revolution  # noqa: F401  (registration; complex families of issue 3)
+from .parametric import ParametricFamily, define_family, unregister_family, user_families  # noqa: F401
 
 SIMPLE = ("plane", "cylinder", "cone", "sphere", "torus")
 
