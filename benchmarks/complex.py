@@ -179,7 +179,7 @@ def main(argv=None) -> int:
         keys = sorted({k for r in rs for k in r["errors"]} - set(INTEGER_PARAMS))
         per = []
         for k in keys:
-            e = np.array([r["errors"].get(k, np.inf) for r in rs if r["errors"]])
+            e = np.array([r["errors"][k] for r in rs if k in r["errors"]])
             per.append(f"{k} {_fmt(float(np.median(e)))} / {_fmt(float(e.max()))}" if len(e) else f"{k} —")
         ints = [r["errors"][k] == 0 for r in rs for k in INTEGER_PARAMS if k in r["errors"]]
         mfe = np.array([r["mfe"] for r in rs if np.isfinite(r["mfe"])])
