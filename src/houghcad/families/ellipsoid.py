@@ -162,6 +162,12 @@ class Ellipsoid(Family):
     # --- standard form ------------------------------------------------------
     def placements(self, P, N, ctx):
         out = []
+        fit = quadric_fit(P, N)
+        if not ctx.local and not _mostly_on(fit, P, 3.0 * ctx.tau):
+            # Whole cloud: vote only where one ellipsoid explains most of it;
+            # elsewhere its faces are left to the per-cluster rounds (the fits
+            # cost tens of milliseconds per candidate).
+            return []
         # Of revolution: axis from the normal lines, centre from the conic
         # A ρ² + C h² + E h + F = 0 in the meridian plane.
         q, a, _, _ = axis_from_normal_lines(P, N)
@@ -170,7 +176,6 @@ class Ellipsoid(Family):
         A_, C_, E_, _ = np.linalg.svd(M, full_matrices=False)[2][-1]
         if abs(C_) > 1e-12 and A_ * C_ > 0:
             out.append(Placement(rotation_to_z(a), q - E_ / (2 * C_) * a, {"kind": "revolution"}))
-        fit = quadric_fit(P, N)
         if fit is not None:
             c, V, semi = fit
             out.append(Placement(_proper(V), c, {"kind": "triaxial", "semi": semi}))
@@ -239,6 +244,9 @@ class Ellipsoid(Family):
         return SPHERE_TOL < (e.max() - e.min()) / e.max() and e.min() > 0.05 * e.max()
 
     def fit(self, prim, P, N):
+        # Each residual is an iterative foot-point solve and the Jacobian is
+        # numerical: a regular subsample keeps a fit to tens of milliseconds.
+        P = P[_fit_subsample(len(P))]
         c0 = np.asarray(prim.params["center"], float)
         V0 = np.asarray(prim.params["axes"], float)
         e0 = np.asarray(prim.params["semi_axes"], float)
@@ -269,7 +277,7 @@ class Ellipsoid(Family):
             return np.where(inside, -d, d)
 
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=60 * len(x0))
+            sol = least_squares(res, x0, method="lm", max_nfev=8 * len(x0))
         except Exception:
             return None
         c, V, e = unpack(sol.x)
@@ -355,3 +363,21 @@ def covered_by_simple(fam: Family, prim: Primitive, P: np.ndarray, ctx) -> bool:
     d_cplx = float(fam.distance(prim, P).mean())
     errs = simple_fit_errors(P, N)
     return any(e <= 1.05 * d_cplx + 0.05 * ctx.tau for e in errs.values())
+
+
+def _fit_subsample(n: int, m: int = 300) -> np.ndarray:
+    """At most m regularly spaced indices of range(n)."""
+    return np.arange(n) if n <= m else np.linspace(0, n - 1, m).astype(np.int64)
+
+
+def _mostly_on(fit, P: np.ndarray, delta: float, share: float = 0.5) -> bool:
+    """Whether at least ``share`` of the points P (n, 3) lie within ``delta``
+    (Sampson distance) of the fitted ellipsoid ``fit`` = (centre, axes, semi-axes)."""
+    if fit is None:
+        return False
+    c, V, semi = fit
+    e = np.maximum(np.asarray(semi, float), 1e-9)
+    Y = (P - c) @ np.asarray(V, float).T
+    F = np.sum((Y / e) ** 2, axis=1) - 1.0
+    g = 2.0 * np.linalg.norm(Y / e**2, axis=1)
+    return bool(np.mean(np.abs(F) < delta * np.maximum(g, 1e-12)) >= share)

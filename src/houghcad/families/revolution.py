@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
+from ._helix import GLOBAL_COMPLEX_RESIDUAL
 from .base import Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
 from .ellipsoid import covered_by_simple
 
@@ -307,7 +308,14 @@ class SurfaceOfRevolution(Family):
 
     # --- standard form and voting -------------------------------------------
     def placements(self, P, N, ctx):
-        q, a, _, _ = axis_from_normal_lines(P, N)
+        q, a, _, res = axis_from_normal_lines(P, N)
+        if not ctx.local:
+            # Whole cloud: vote only when its normal lines meet one axis (a
+            # turned part), as the helical families' gate; elsewhere the faces
+            # are left to the per-cluster rounds (profile fits are costly).
+            spread = float(np.mean(((P - P.mean(axis=0)) ** 2).sum(axis=1)))
+            if res / max(spread, 1e-300) >= GLOBAL_COMPLEX_RESIDUAL:
+                return []
         h = (P - q) @ a
         base = q + a * float(np.median(h))
         out = []
@@ -504,6 +512,10 @@ class SurfaceOfRevolution(Family):
         return prof.check is None or bool(prof.check(_theta_dict(prof, th)))
 
     def fit(self, prim, P, N):
+        # Residuals need foot points on the profile: a regular subsample of
+        # at most 300 points keeps a fit cheap and the parameters as good.
+        if len(P) > 300:
+            P = P[np.linspace(0, len(P) - 1, 300).astype(np.int64)]
         prof = PROFILES[prim.params["profile"]]
         c0, a0 = np.asarray(prim.params["axis_point"], float), unit(prim.params["axis"])
         e1, e2 = tangent_basis(a0)
@@ -555,7 +567,7 @@ class SurfaceOfRevolution(Family):
 
         x0 = np.zeros(5 + len(th0))
         try:
-            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=30 * len(x0))
+            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=10 * len(x0))
         except Exception:
             return None
         return unpack(sol.x)
