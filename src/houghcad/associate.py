@@ -38,7 +38,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from .families.base import Family, Frame, Primitive, unit
+from .families.base import Family, Frame, Primitive, regular_indices, unit
 from .recognize import Candidate
 
 __all__ = ["Associator", "Item", "RawGroup", "extent", "pivot"]
@@ -255,7 +255,7 @@ class Associator:
 
     def _refit(self, fam: Family, prim: Primitive, idx: np.ndarray) -> Primitive:
         """Least-squares fit on (a deterministic subsample of) the points idx."""
-        sel = idx if len(idx) <= _MAX_FIT else idx[np.linspace(0, len(idx) - 1, _MAX_FIT).astype(np.int64)]
+        sel = idx[regular_indices(len(idx), _MAX_FIT)]
         try:
             out = fam.fit(prim, self._pre.points[sel], self._pre.normals[sel])
         except (np.linalg.LinAlgError, ValueError):

@@ -163,6 +163,12 @@ def unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(n > 0, n, 1.0)
 
 
+def regular_indices(n: int, m: int) -> np.ndarray:
+    """At most m regularly spaced indices of range(n) (all of them when n <= m),
+    for deterministic subsamples of point sets."""
+    return np.arange(n) if n <= m else np.linspace(0, n - 1, m).astype(np.int64)
+
+
 def tangent_basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors completing ``a`` to an orthonormal basis."""
     a = unit(a)

@@ -24,7 +24,8 @@ from scipy.spatial.transform import Rotation
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register,
+                   regular_indices, tangent_basis, unit)
 
 #: Relative spread (max − min) / max of the semi-axes below which the shape is a sphere.
 SPHERE_TOL = 0.05
@@ -246,7 +247,7 @@ class Ellipsoid(Family):
     def fit(self, prim, P, N):
         # Each residual is an iterative foot-point solve and the Jacobian is
         # numerical: a regular subsample keeps a fit to tens of milliseconds.
-        P = P[_fit_subsample(len(P))]
+        P = P[regular_indices(len(P), 300)]
         c0 = np.asarray(prim.params["center"], float)
         V0 = np.asarray(prim.params["axes"], float)
         e0 = np.asarray(prim.params["semi_axes"], float)
@@ -364,10 +365,6 @@ def covered_by_simple(fam: Family, prim: Primitive, P: np.ndarray, ctx) -> bool:
     errs = simple_fit_errors(P, N)
     return any(e <= 1.05 * d_cplx + 0.05 * ctx.tau for e in errs.values())
 
-
-def _fit_subsample(n: int, m: int = 300) -> np.ndarray:
-    """At most m regularly spaced indices of range(n)."""
-    return np.arange(n) if n <= m else np.linspace(0, n - 1, m).astype(np.int64)
 
 
 def _mostly_on(fit, P: np.ndarray, delta: float, share: float = 0.5) -> bool:

@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import Frame, Family, Placement, Primitive, register, tangent_basis, unit
+from .base import Frame, Family, Placement, Primitive, register, regular_indices, tangent_basis, unit
 from .cylinder import axis_candidates
 
 #: Orders of the directrix that are swept.
@@ -152,9 +152,8 @@ def best_order(Q: np.ndarray, c0: np.ndarray, trim: bool = True):
     """
     if len(Q) < 10:
         return None
-    if len(Q) > _MAX_ORDER_POINTS:
-        # 11 orders x 12 centre iterations: a regular subsample fixes the shape as well.
-        Q = Q[np.linspace(0, len(Q) - 1, _MAX_ORDER_POINTS).astype(np.int64)]
+    # 11 orders x 12 centre iterations: a regular subsample fixes the shape as well.
+    Q = Q[regular_indices(len(Q), _MAX_ORDER_POINTS)]
     best = None
     for n in N_VALUES:
         c, p, res = directrix_centre(Q, n, c0)

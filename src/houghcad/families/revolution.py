@@ -38,8 +38,9 @@ from scipy.spatial import cKDTree
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from ._helix import GLOBAL_COMPLEX_RESIDUAL
-from .base import Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
+from ._helix import GLOBAL_COMPLEX_RESIDUAL, relative_complex_residual
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register,
+                   regular_indices, tangent_basis, unit)
 from .ellipsoid import covered_by_simple
 
 
@@ -313,8 +314,7 @@ class SurfaceOfRevolution(Family):
             # Whole cloud: vote only when its normal lines meet one axis (a
             # turned part), as the helical families' gate; elsewhere the faces
             # are left to the per-cluster rounds (profile fits are costly).
-            spread = float(np.mean(((P - P.mean(axis=0)) ** 2).sum(axis=1)))
-            if res / max(spread, 1e-300) >= GLOBAL_COMPLEX_RESIDUAL:
+            if relative_complex_residual(P, res) >= GLOBAL_COMPLEX_RESIDUAL:
                 return []
         h = (P - q) @ a
         base = q + a * float(np.median(h))
@@ -514,8 +514,7 @@ class SurfaceOfRevolution(Family):
     def fit(self, prim, P, N):
         # Residuals need foot points on the profile: a regular subsample of
         # at most 300 points keeps a fit cheap and the parameters as good.
-        if len(P) > 300:
-            P = P[np.linspace(0, len(P) - 1, 300).astype(np.int64)]
+        P = P[regular_indices(len(P), 300)]
         prof = PROFILES[prim.params["profile"]]
         c0, a0 = np.asarray(prim.params["axis_point"], float), unit(prim.params["axis"])
         e1, e2 = tangent_basis(a0)
