@@ -56,8 +56,16 @@ def screw_placement(P: np.ndarray, N: np.ndarray) -> tuple[Placement, float, flo
     q, a, p, res = axis_from_normal_lines(P, N)
     m = P.mean(axis=0)
     q = q + ((m - q) @ a) * a
-    spread = float(np.mean(((P - m) ** 2).sum(axis=1)))
-    return Placement(rotation_to_z(a), q), float(p), float(res / max(spread, 1e-300))
+    return Placement(rotation_to_z(a), q), float(p), relative_complex_residual(P, res)
+
+
+def relative_complex_residual(P: np.ndarray, res: float) -> float:
+    """The residual of :func:`axis_from_normal_lines` on the points P (n, 3),
+    relative to their mean squared distance from their centroid: below
+    :data:`GLOBAL_COMPLEX_RESIDUAL` the whole set is one screw-invariant (or
+    revolution) surface."""
+    spread = float(np.mean(((P - P.mean(axis=0)) ** 2).sum(axis=1)))
+    return float(res / max(spread, 1e-300))
 
 
 def band_edges(rho: np.ndarray, sigma: float) -> tuple[float, float]:
