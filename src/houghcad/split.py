@@ -10,6 +10,7 @@ the vote decides type and parameters.
 from __future__ import annotations
 
 import ctypes
+import functools
 import warnings
 from dataclasses import replace
 
@@ -39,6 +40,14 @@ _CGAL_RANDOM_GUARD = "_ZGVZN4CGAL18get_default_randomEvE14default_random"
 _cgal_warned = False
 
 
+@functools.lru_cache(maxsize=1)
+def _cgal_shape_detection() -> ctypes.CDLL:
+    """The bindings' Shape_detection module as a C library (loaded once)."""
+    from CGAL import _CGAL_Shape_detection
+
+    return ctypes.CDLL(_CGAL_Shape_detection.__file__)
+
+
 def seed_cgal_random(seed: int) -> bool:
     """Put CGAL's default random generator, in the calling thread, in a state
     given by ``seed``, as ``CGAL::Random(seed)`` would.
@@ -52,9 +61,7 @@ def seed_cgal_random(seed: int) -> bool:
     """
     global _cgal_warned
     try:
-        from CGAL import _CGAL_Shape_detection
-
-        lib = ctypes.CDLL(_CGAL_Shape_detection.__file__)
+        lib = _cgal_shape_detection()
         addr = ctypes.addressof(ctypes.c_char.in_dll(lib, _CGAL_RANDOM))
         guard = ctypes.c_char.in_dll(lib, _CGAL_RANDOM_GUARD)
     except (ImportError, OSError, ValueError, AttributeError):
