@@ -27,13 +27,14 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import multiprocessing as mp
-import re
 import shlex
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from fit4cad import replace_section  # the scripts run from benchmarks/, beside fit4cad.py
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS_MD = REPO_ROOT / "BENCHMARKS.md"
@@ -216,12 +217,7 @@ def main(argv=None) -> int:
     ])
     print(section)
     if not a.no_write:
-        text = BENCHMARKS_MD.read_text(encoding="utf-8")
-        pat = re.compile(r"<!-- complex:begin -->.*?<!-- complex:end -->\n?", re.DOTALL)
-        text = pat.sub(lambda _: section, text) if pat.search(text) else text.rstrip("\n") + "\n\n" + section
-        tmp = BENCHMARKS_MD.with_suffix(".md.tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(BENCHMARKS_MD)
+        replace_section(BENCHMARKS_MD, "complex", section)
     return 0
 
 

@@ -403,7 +403,14 @@ def atomic_write(path: Path, text: str) -> None:
 
 def write_section(md_path: Path, label: str, section: str) -> None:
     """Replace the ``fit4cad:LABEL`` section of *md_path*, or append it; create the file if needed."""
-    begin, end = f"<!-- fit4cad:{label}:begin -->", f"<!-- fit4cad:{label}:end -->"
+    replace_section(md_path, f"fit4cad:{label}", section)
+
+
+def replace_section(md_path: Path, marker: str, section: str) -> None:
+    """Replace the text between ``<!-- MARKER:begin -->`` and ``<!-- MARKER:end -->`` (both
+    included) of *md_path* by *section*, or append it; written whole or not at all. The other
+    benchmark scripts write their sections of BENCHMARKS.md with it."""
+    begin, end = f"<!-- {marker}:begin -->", f"<!-- {marker}:end -->"
     text = md_path.read_text(encoding="utf-8") if md_path.exists() else "# Benchmarks\n"
     pat = re.compile(re.escape(begin) + r".*?" + re.escape(end) + r"\n?", re.DOTALL)
     if pat.search(text):
