@@ -77,3 +77,54 @@ def test_settle_edges_gives_shared_boundary_points_to_the_smaller_segment():
         assert np.isin(on, segments[j].indices).all()
         assert not np.isin(on, segments[big].indices).any()
     assert min(len(s.indices) for s in segments) >= ctx.min_points
+
+
+def _carved(family, seed, n_points=3000):
+    """A complex surface carved into cylinder slices, as the global round of
+    simple families leaves it."""
+    from houghcad.families import REGISTRY
+    from houghcad.recognize import recognize
+    from houghcad.split import accept
+
+    cloud = synth.single(family, seed=seed, n_points=n_points)
+    ctx = _context(cloud.points)
+    free = np.ones(len(cloud.points), bool)
+    segments = []
+    lctx = replace(ctx, local=True)
+    for _ in range(4):
+        found = recognize(np.flatnonzero(free), [REGISTRY["cylinder"], REGISTRY["plane"]], lctx, free)
+        if not found:
+            break
+        accept(found, free, ctx, segments)
+    return cloud, ctx, free, segments
+
+
+def test_consolidate_lets_a_complex_family_retake_its_carved_surface():
+    from houghcad.families import select
+    from houghcad.split import consolidate
+
+    cloud, ctx, free, segments = _carved("generalized_cylinder", seed=1)
+    assert len(segments) >= 3 and all(s.family.name in ("cylinder", "plane") for s in segments)
+    consolidate(select("all"), ctx, free, segments)
+    truth = np.flatnonzero(cloud.labels == 0)
+    best = max(segments, key=lambda s: len(s.indices))
+    assert best.family.name == "generalized_cylinder"
+    inter = len(np.intersect1d(best.indices, truth))
+    assert 2 * inter / (len(best.indices) + len(truth)) >= 0.8
+    assert best.prim.params["n"] == cloud.primitives[0]["params"]["n"]
+    # Every point is owned by one segment or free, never both.
+    owned = np.concatenate([s.indices for s in segments])
+    assert len(owned) == len(np.unique(owned))
+    assert not free[owned].any()
+
+
+def test_consolidate_leaves_simple_faces_alone():
+    import houghcad
+
+    # A plate with holes and a boss: planes and cylinders, several of them
+    # tangent-continuous, no complex surface. All families give the simple result.
+    points = synth.PARTS["plate_with_holes"](seed=2, n_points=4000).points
+    simple = houghcad.segment(points, families="simple")
+    every = houghcad.segment(points, families="all")
+    assert sorted(s.type for s in every.segments) == sorted(s.type for s in simple.segments)
+    assert sorted(len(s.indices) for s in every.segments) == sorted(len(s.indices) for s in simple.segments)

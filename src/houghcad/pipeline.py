@@ -14,7 +14,7 @@ from .errors import InputError
 from .preprocess import preprocess
 from .recognize import Candidate, Context, mean_fitting_error, recognize
 from .result import GROUP_KINDS, Group, Part, Result, Segment
-from .split import absorb, accept, settle_edges, splitting_phase
+from .split import absorb, accept, consolidate, settle_edges, splitting_phase
 
 
 class Segmenter:
@@ -121,6 +121,7 @@ class Segmenter:
             report("splitting", 0.3 + 0.6 * min(done[0] / n0, 1.0))
 
         splitting_phase(fams, ctx, free, segments, progress=step)
+        consolidate(fams, ctx, free, segments)
         absorb(segments, free, ctx)
         # On CAD samples the faces' boundary curves lie on both faces.
         settle_edges(segments, ctx, max(0.3 * pre.spacing, ctx.tau), ctx.link)

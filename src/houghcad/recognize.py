@@ -21,6 +21,10 @@ from .hough import accumulate, persistent_peaks, smooth
 from .preprocess import Preprocessed
 
 
+#: Peaks evaluated per placement for a complex (non-simple) family.
+COMPLEX_MAX_PEAKS = 6
+
+
 @dataclass
 class Context:
     """Thresholds and data shared by a run (standard-frame units).
@@ -203,7 +207,10 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
         if len(voter) == 0:
             continue
         H = smooth(accumulate(grid, voter, vals), grid.wrap)
-        pk, _ = persistent_peaks(H, ctx.persistence, grid.wrap, max_peaks=ctx.max_peaks)
+        # A complex family's candidate costs tens of milliseconds of nonlinear
+        # fits; its surface is one of the most persistent peaks.
+        cap = ctx.max_peaks if fam.simple else min(ctx.max_peaks, COMPLEX_MAX_PEAKS)
+        pk, _ = persistent_peaks(H, ctx.persistence, grid.wrap, max_peaks=cap)
         pk = pk[H.ravel()[pk] >= ctx.min_votes]
         for v in grid.cell_center(pk):
             prim = fam.primitive(v, pl)

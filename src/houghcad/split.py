@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from sklearn.cluster import DBSCAN
 
 from .families import Family
-from .recognize import Candidate, Context, recognize
+from .recognize import Candidate, Context, mean_fitting_error, recognize
 
 
 def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.ndarray]:
@@ -247,3 +247,218 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
         add = np.flatnonzero(moved & (best == j))
         if len(add) or len(keep) < len(s.indices):
             segments[j] = replace(s, indices=np.union1d(keep, add))
+
+
+def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth: bool = True) -> np.ndarray:
+    """Pairs (m, 2) of segments that meet along a tangent-continuous boundary.
+
+    Two segments touch where a point of one has a neighbour (within ``link``)
+    in the other; the contact is smooth where the two primitives' normals at
+    those points agree within the angle tolerance (the fitted surfaces', not
+    the estimated normals, which blur across a crease) for most contacts.
+    A pair needs at least √(points of the smaller) / 3 contact points, and 3:
+    a boundary, not a corner. ``smooth=False``: any such contact.
+    """
+    if len(segments) < 2:
+        return np.zeros((0, 2), np.int64)
+    P = ctx.pre.points
+    owner = np.full(len(P), -1, dtype=np.int64)
+    sn = np.zeros_like(P)
+    for j, s in enumerate(segments):
+        owner[s.indices] = j
+        sn[s.indices] = s.family.surface_normals(s.prim, P[s.indices])
+    pts = np.flatnonzero(owner >= 0)
+    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=ctx.link)
+    ok = np.isfinite(dist)
+    nb = np.where(ok, nb, 0)
+    other = np.where(ok, owner[nb], -1)
+    mine = owner[pts][:, None]
+    cos = np.abs(np.einsum("ij,ikj->ik", sn[pts], sn[nb]))
+    mask = (other >= 0) & (other != mine)
+    if not mask.any():
+        return np.zeros((0, 2), np.int64)
+    n = len(segments)
+    a, b = np.broadcast_to(mine, other.shape)[mask], other[mask]
+    pi = np.broadcast_to(pts[:, None], other.shape)[mask]
+    pair = np.minimum(a, b) * n + np.maximum(a, b)
+    # Per pair: contact points (each once) and the share of contacts whose
+    # normals agree within half the tolerance (a crease of a few degrees
+    # between two faces is still a crease).
+    key = np.unique(pair * len(P) + pi)
+    pair_u, count = np.unique(key // len(P), return_counts=True)
+    agree = cos[mask] >= np.cos(0.5 * ctx.angle)
+    share = np.bincount(np.searchsorted(pair_u, pair), weights=agree, minlength=len(pair_u)) / \
+        np.bincount(np.searchsorted(pair_u, pair), minlength=len(pair_u))
+    sizes = np.array([len(s.indices) for s in segments])
+    u, v = pair_u // n, pair_u % n
+    keep = ((share >= 0.5) | (not smooth)) & (count >= np.maximum(3, np.sqrt(np.minimum(sizes[u], sizes[v])) / 3))
+    return np.stack([u[keep], v[keep]], axis=1)
+
+
+def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate]) -> None:
+    """Let complex families retake surfaces that simpler ones carved into pieces, in place.
+
+    The global round votes only the simple families on the whole cloud; on a
+    complex surface they find tangent slices (cylinders along the lobes of a
+    generalised cylinder, spheres and planes on a helical surface), each
+    within the inlier distance, before the per-cluster rounds can see the
+    whole surface. Each group of segments joined by tangent-continuous
+    boundaries is voted again by the complex families; a complex candidate
+    replaces the segments it explains when it covers at least two of them
+    (80 % of each one's points) and fits them no worse than they fit
+    themselves. Complex segments then take the adjacent pieces of their
+    surface (:func:`merge_complex`).
+    """
+    cplx = [f for f in families if not f.simple]
+    if not cplx or len(segments) < 2:
+        return
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = smooth_adjacency(segments, ctx)
+    n = len(segments)
+    g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    ncomp, lab = connected_components(g, directed=False)
+    P = ctx.pre.points
+    removed = np.zeros(n, bool)
+    added: list[Candidate] = []
+    for comp in range(ncomp):
+        members = np.flatnonzero(lab == comp)
+        sizes = np.array([len(segments[m].indices) for m in members])
+        # A carved surface is cut into comparable pieces; a group that one
+        # face dominates (a torus and the plane it meets) is not voted.
+        if len(members) < 2 or sizes.max() > 2 / 3 * sizes.sum():
+            continue
+        region = np.concatenate([segments[m].indices for m in members])
+        avail = np.zeros(len(P), bool)
+        avail[region] = True
+        # Voted as a whole cloud (ctx.local False): the families' gates skip a
+        # group that is not one complex surface, which most groups of simple
+        # faces are not (a plane, a fillet and a plane).
+        for c in recognize(np.sort(region), cplx, ctx, avail):
+            got = _covered(c, [segments[m] for m in members], ctx)
+            got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
+            if len(got) < 2 or _simple_suffices([segments[m] for m, _, _ in got], ctx):
+                continue
+            removed[[m for m, _, _ in got]] = True
+            added.append(_union(c, [q for _, q, _ in got], P))
+    if added:
+        for m in np.flatnonzero(removed):
+            free[segments[m].indices] = True
+        for c in added:
+            free[c.indices] = False
+        segments[:] = [s for m, s in enumerate(segments) if not removed[m]]
+        segments.extend(grow(c, free, ctx) for c in added)
+    merge_complex(segments, ctx, free)
+
+
+def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rounds: int = 10) -> None:
+    """Each complex segment takes the smaller adjacent segments that lie on its
+    surface, in place.
+
+    Pieces of one complex surface found apart (by different clusters, or
+    after a seam cut a group) each fit their own small patch; association
+    merges only equal parameters, and the small patches' parameters are
+    loose, so the family is voted again on the segment and those neighbours.
+    A slice of another family joins when the segment fits it about as well
+    as its own points.
+    """
+    P = ctx.pre.points
+    tried: set[tuple[int, ...]] = set()  # re-votes done: each configuration once
+    for _ in range(rounds):
+        grown = False
+        edges = smooth_adjacency(segments, ctx, smooth=False)
+        order = sorted(range(len(segments)), key=lambda i: -len(segments[i].indices))
+        segs: list[Candidate | None] = list(segments)
+        for i in order:
+            c = segs[i]
+            if c is None or c.family.simple:
+                continue
+            nbrs = np.unique(np.r_[edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]])
+            nbrs = [j for j in nbrs.tolist() if segs[j] is not None and len(segs[j].indices) <= len(c.indices)]
+            if not nbrs:
+                continue
+            got = _covered(c, [segs[j] for j in nbrs], ctx, own_fit=True)
+            take = [(nbrs[k], q) for k, q, _ in got]
+            rest = sorted(set(nbrs) - {j for j, _ in take})
+            key = (len(c.indices), int(c.indices[0]), *(int(segs[j].indices[0]) for j in rest))
+            if rest and key not in tried:
+                tried.add(key)
+                # Pieces fitted apart on small patches have loose parameters:
+                # vote the family again on them and the segment.
+                region = np.unique(np.concatenate([c.indices] + [segs[j].indices for j in rest]))
+                avail = np.zeros(len(P), bool)
+                avail[region] = True
+                for new in recognize(region, [c.family], ctx, avail):
+                    mine = _covered(new, [c], ctx)
+                    if not mine:
+                        continue
+                    more = _covered(new, [segs[j] for j in rest], ctx)
+                    if more:
+                        free[c.indices] = True
+                        c = _union(new, [mine[0][1]], P)
+                        free[c.indices] = False
+                        take += [(rest[k], q) for k, q, _ in more]
+                    break
+            for j, q in take:
+                free[segs[j].indices] = True
+                segs[j] = None
+            if take:
+                c = _union(c, [c.indices] + [q for _, q in take], P)
+                free[c.indices] = False
+                grown = True
+            segs[i] = c
+        segments[:] = [s for s in segs if s is not None]
+        if not grown:
+            break
+
+
+def _simple_suffices(pieces: list[Candidate], ctx: Context) -> bool:
+    """Whether one primitive of the pieces' own (simple) families, refitted on
+    all of them, explains every piece: then they are pieces of one simple
+    face (a hole split in two), for association to merge."""
+    idx = np.concatenate([s.indices for s in pieces])
+    sel = idx[np.sort(np.random.default_rng(ctx.seed).choice(len(idx), min(len(idx), 600), replace=False))]
+    for s in sorted(pieces, key=lambda s: -len(s.indices)):
+        if not s.family.simple:
+            continue
+        prim = s.family.fit(s.prim, ctx.pre.points[sel], ctx.pre.normals[sel])
+        if prim is None or not s.family.valid(prim, ctx):
+            continue
+        if len(_covered(replace(s, prim=prim), pieces, ctx)) == len(pieces):
+            return True
+    return False
+
+
+def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool = False) \
+        -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """The pieces that candidate ``c`` explains: (position, points within tau
+    with compatible normals, their distances) for each piece that has 80 % of
+    its points so and that ``c`` fits no worse than its own primitive does or,
+    with ``own_fit``, no worse than half again ``c``'s fit to its own points."""
+    P, N = ctx.pre.points, ctx.pre.normals
+    out = []
+    for j, s in enumerate(pieces):
+        Q = s.indices
+        d = c.family.distance(c.prim, P[Q])
+        ok = d < ctx.tau
+        if ok.mean() < 0.8:
+            continue
+        sn = c.family.surface_normals(c.prim, P[Q[ok]])
+        ok[ok] = np.abs(np.einsum("ij,ij->i", sn, N[Q[ok]])) >= ctx.cos_angle
+        if ok.mean() < 0.8:
+            continue
+        bound = 1.1 * s.family.distance(s.prim, P[Q]).mean() + 0.02 * ctx.tau
+        if own_fit:
+            bound = max(bound, 1.5 * c.family.distance(c.prim, P[c.indices]).mean())
+        if d[ok].mean() > bound:
+            continue
+        out.append((j, Q[ok], d[ok]))
+    return out
+
+
+def _union(c: Candidate, parts: list[np.ndarray], P: np.ndarray) -> Candidate:
+    """Candidate ``c``'s primitive over the union of the index arrays ``parts``."""
+    idx = np.unique(np.concatenate(parts))
+    d = c.family.distance(c.prim, P[idx])
+    return Candidate(c.family, c.prim, idx, mean_fitting_error(d, P[idx]), {"d": d})
