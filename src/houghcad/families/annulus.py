@@ -135,13 +135,17 @@ def ring_fit(Q: np.ndarray, c0, b0: float, a0: float, s0: float, smin: float, tr
     if len(Q) < 20 or ext <= 0:
         return None
     bg = 1.0 / ext
-    x = np.array([c0[0], c0[1], max(b0, 0.0), max(a0 - b0, 10 * smin), max(s0, smin)], float)
-    bounds = [(None, None), (None, None), (0.0, None), (smin, None), (smin, ext)]
+    w0 = max(a0 - b0, 10 * smin)
+    x = np.array([c0[0], c0[1], max(b0, 0.0), w0, min(max(s0, smin), 0.25 * w0)], float)
+    # A blur comparable to the band's width is no ring, and there the
+    # normalisation (a² − b²)/2 fails: the likelihood grows without bound as
+    # the band shrinks under a wide blur.
+    bounds = [(None, None), (None, None), (0.0, None), (0.25 * w0, 4 * w0), (smin, max(0.25 * w0, smin))]
     keep = np.ones(len(Q), bool)
     for it in range(trims + 1):
         if it:
             k = _complete_sectors(Q, x[:2], x[2], x[2] + x[3], x[4])
-            if k.sum() < max(20, 0.3 * len(Q)) or k.all():
+            if k.sum() < max(20, 0.3 * len(Q)) or k.all() or (k == keep).all():
                 break
             keep = k
         try:
