@@ -156,7 +156,13 @@ def ring_fit(Q: np.ndarray, c0, b0: float, a0: float, s0: float, smin: float, tr
         if not np.isfinite(sol.x).all():
             return None
         x = sol.x
-    return x[:2], float(x[2]), float(x[2] + x[3]), float(x[4]), keep
+    # On exact samples the blur sits at its floor and the edges at about two
+    # floors beyond the extreme radii; the band never extends past the points.
+    rho = np.linalg.norm(Q - x[:2], axis=1)
+    b, a = max(float(x[2]), float(rho.min())), min(float(x[2] + x[3]), float(rho.max()))
+    if not b < a:
+        return None
+    return x[:2], b, a, float(x[4]), keep
 
 
 def circle_centre(Q: np.ndarray) -> np.ndarray:
