@@ -17,7 +17,8 @@ import houghcad
 from houghcad import synth
 from houghcad.errors import InputError
 from houghcad.evaluate import classification_measures
-from houghcad.families import REGISTRY, Primitive
+from houghcad.families import REGISTRY, Family, Primitive
+from houghcad.recognize import refine
 from houghcad.result import Result
 
 # ---------------------------------------------------------------------------- parameter errors
@@ -385,3 +386,74 @@ def test_result_round_trip_through_json(part_runs):
     np.testing.assert_array_equal(back.labels(), res.labels())
     assert json.loads(res.to_json()) == res.to_dict()
     assert json.dumps(back.to_dict()) == text
+
+
+# ---------------------------------------------------------------------------- refinement
+
+
+class _Strip(Family):
+    """A stand-in family refining the plane: accepts a segment when ``accept`` is set."""
+
+    name = "test_strip"
+    refines = "plane"
+    complexity = 9
+    simple = False
+
+    def __init__(self, accept: bool):
+        self.accept, self.calls = accept, 0
+
+    def distance(self, prim, P):
+        return REGISTRY["plane"].distance(prim, P)
+
+    def refine(self, base, P, N, ctx):
+        self.calls += 1
+        return Primitive(self.name, dict(base.params)) if self.accept else None
+
+
+@pytest.fixture(scope="module")
+def plane_segment():
+    """The recognised segments of a noisy square plate (one plane) and the run's context."""
+    cloud = synth.single("plane", 1, n_points=1500, noise=0.005)
+    seg = houghcad.Segmenter(families="plane", seed=0).fit(cloud.points)
+    segments, pre, ctx = seg._recognised[:3]
+    return segments, ctx
+
+
+def test_family_protocol_refines_nothing_by_default():
+    assert Family.refines is None
+    assert REGISTRY["plane"].refine(None, np.zeros((3, 3)), np.zeros((3, 3)), None) is None
+    # Every declared base family exists.
+    assert all(f.refines in REGISTRY for f in REGISTRY.values() if f.refines is not None)
+
+
+@pytest.mark.parametrize("accept", [True, False])
+def test_refine_offers_base_segments_to_the_refining_family(plane_segment, accept):
+    segments, ctx = plane_segment
+    segs = list(segments)
+    strip = _Strip(accept)
+    refine(segs, [REGISTRY["plane"], strip], ctx)
+    assert strip.calls == sum(s.family.name == "plane" for s in segments) >= 1
+    for old, new in zip(segments, segs):
+        np.testing.assert_array_equal(new.indices, old.indices)
+        assert new.family is (strip if accept and old.family.name == "plane" else old.family)
+        if new.family is strip:
+            assert new.prim.family == "test_strip" and np.isfinite(new.mfe)
+
+
+def test_refine_uses_only_selected_families(plane_segment):
+    segments, ctx = plane_segment
+    segs = list(segments)
+    refine(segs, [REGISTRY["plane"]], ctx)
+    assert [s.family for s in segs] == [s.family for s in segments]
+
+
+def test_a_family_refining_a_selected_one_is_not_voted(monkeypatch):
+    """Under "all" the annulus only refines plane segments; selected alone it is voted."""
+    def no_vote(self, P, N, ctx):
+        raise AssertionError("annulus voted")
+
+    monkeypatch.setattr(type(REGISTRY["annulus"]), "placements", no_vote)
+    cloud = synth.single("plane", 2, n_points=1500, noise=0.005)
+    houghcad.segment(cloud.points, families="plane,annulus", seed=0)
+    with pytest.raises(AssertionError, match="annulus voted"):
+        houghcad.segment(cloud.points, families="annulus", seed=0)

@@ -1,4 +1,4 @@
-"""The whole pipeline: preprocessing, recognition, splitting, output (paper §5)."""
+"""The whole pipeline: preprocessing, recognition, splitting, refinement, output (paper §5)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from . import families as fam_mod
 from .associate import Associator, Item, extent
 from .errors import InputError
 from .preprocess import preprocess
-from .recognize import Candidate, Context, mean_fitting_error, recognize
+from .recognize import Candidate, Context, mean_fitting_error, recognize, refine
 from .result import GROUP_KINDS, Group, Part, Result, Segment
 from .split import absorb, accept, consolidate, settle_edges, splitting_phase
 
@@ -89,6 +89,11 @@ class Segmenter:
         except TypeError as exc:
             raise InputError(f"association options: {exc}") from None
         fams = fam_mod.select(self.families)
+        # A family refining a selected one is not voted: it would tie with its
+        # base family, which wins ties; the base's segments are offered to it
+        # after recognition instead (see ``refine`` below).
+        names = {f.name for f in fams}
+        voted = [f for f in fams if f.refines not in names]
         timing: dict[str, float] = {}
         report = self.progress or (lambda stage, frac: None)
 
@@ -107,7 +112,7 @@ class Segmenter:
         # families voted per cluster, are settled in the splitting phase where
         # every family competes for the same points.
         gctx = replace(ctx, min_points=max(ctx.min_points, len(points) // 100))
-        found = recognize(np.arange(len(points)), fams, gctx, free)
+        found = recognize(np.arange(len(points)), voted, gctx, free)
         accept(found, free, ctx, segments)
         absorb(segments, free, ctx)
         timing["recognition"] = time.perf_counter() - t1
@@ -120,11 +125,14 @@ class Segmenter:
             done[0] += n
             report("splitting", 0.3 + 0.6 * min(done[0] / n0, 1.0))
 
-        splitting_phase(fams, ctx, free, segments, progress=step)
-        consolidate(fams, ctx, free, segments)
+        splitting_phase(voted, ctx, free, segments, progress=step)
+        consolidate(voted, ctx, free, segments)
         absorb(segments, free, ctx)
         # On CAD samples the faces' boundary curves lie on both faces.
         settle_edges(segments, ctx, max(0.3 * pre.spacing, ctx.tau), ctx.link)
+        # Families that specialise a recognised one (annulus: a plane bounded
+        # by two circles) take the segments that have their shape.
+        refine(segments, fams, ctx)
         timing["splitting"] = time.perf_counter() - t2
 
         self._recognised = (segments, pre, ctx, points, source, dict(timing), t0)

@@ -328,3 +328,24 @@ def recognize(idx: np.ndarray, families: list[Family], ctx: Context, free: np.nd
         for prim, coarse in propose(fam, idx, ctx):
             cands.extend(evaluate(fam, prim, idx, ctx, coarse))
     return select(cands, free, ctx)
+
+
+def refine(segments: list[Candidate], families: list[Family], ctx: Context) -> None:
+    """Offer every segment to the selected families that refine its family
+    (:attr:`Family.refines`), in place: the first that accepts takes the
+    segment, points unchanged. Selection cannot make that choice, since both
+    families explain the points equally well and ties go to the simpler one."""
+    by_base: dict[str, list[Family]] = {}
+    for f in families:
+        if f.refines is not None:
+            by_base.setdefault(f.refines, []).append(f)
+    if not by_base:
+        return
+    for k, c in enumerate(segments):
+        for f in by_base.get(c.family.name, ()):
+            P = ctx.pre.points[c.indices]
+            prim = f.refine(c.prim, P, ctx.pre.normals[c.indices], ctx)
+            if prim is not None and f.valid(prim, ctx):
+                d = f.distance(prim, P)
+                segments[k] = Candidate(f, prim, c.indices, mean_fitting_error(d, P), {"d": d})
+                break

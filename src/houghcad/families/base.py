@@ -10,6 +10,9 @@ A family is one file: a subclass of :class:`Family` registered with
 - ``primitive``: the primitive of a cell, back in the cloud's frame;
 - ``distance`` / ``surface_normals``: point-to-surface geometry;
 - ``fit``: least-squares refinement on inliers;
+- ``refines`` / ``refine`` (optional): the family specialises another one
+  (same surface, a particular boundary) and takes over its segments that
+  have that shape;
 - ``to_world`` and ``descriptors``.
 
 Everything a family computes before ``to_world`` is in the cloud's
@@ -90,6 +93,12 @@ class Family:
     simple: ClassVar[bool] = True
     #: Whether it is sought on the whole cloud in the first round.
     global_search: ClassVar[bool] = True
+    #: Name of the family this one specialises (same surface, plus a boundary
+    #: shape: an annulus is a plane bounded by two circles). The two explain
+    #: the points equally well and ties go to the simpler one, so when both
+    #: are selected this one is not voted: after recognition, the base
+    #: family's segments are offered to :meth:`refine`.
+    refines: ClassVar[str | None] = None
 
     # --- standard form and voting -------------------------------------------
     def placements(self, P: np.ndarray, N: np.ndarray, ctx) -> list[Placement]:
@@ -126,6 +135,13 @@ class Family:
     def valid(self, prim: Primitive, ctx) -> bool:
         """Reject degenerate shapes (radii beyond the model's size...)."""
         return True
+
+    def refine(self, base: Primitive, P: np.ndarray, N: np.ndarray, ctx) -> Primitive | None:
+        """This family's primitive for a segment (points P, normals N) of the
+        family it ``refines`` (primitive ``base``), or None when the points do
+        not have this family's shape. The primitive must explain P as well as
+        ``base`` does: the segment keeps its points."""
+        return None
 
     # --- output -------------------------------------------------------------
     def to_world(self, prim: Primitive, T: Similarity) -> dict[str, Any]:
