@@ -227,3 +227,15 @@ def test_input_normals_are_used_as_given():
     assert _normal_errors(cloud, pre).max() < 1e-4  # arccos near 1: ~1e-6° of rounding
     with pytest.raises(ValueError):
         preprocess(cloud.points, method="nonsense")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sparse_clean_plate_is_not_taken_for_noise(seed):
+    # At 1500 points the plate is about two spacings thick: every 8- and
+    # 16-neighbourhood holds both faces, and the residual-based estimate read
+    # about 2 spacings of noise (then the wide-neighbourhood normals blurred
+    # the holes away). Most 4-point neighbourhoods stay on one face.
+    cloud = synth.plate_with_holes(seed=seed, n_points=1500, noise=0.0)
+    pre = preprocess(cloud.points, seed=0)
+    assert pre.noise < 0.05 * pre.spacing
+    assert pre.normals_method == "pca"

@@ -19,7 +19,9 @@ from scipy.spatial import cKDTree
 from sklearn.cluster import DBSCAN
 
 from .families import Family
-from .recognize import Candidate, Context, mean_fitting_error, recognize
+from .families.base import Primitive
+from .preprocess import rotation_to_z
+from .recognize import Candidate, Context, dense_subsets, mean_fitting_error, recognize, select
 
 
 def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.ndarray]:
@@ -152,6 +154,8 @@ def splitting_phase(families: list[Family], ctx: Context, free: np.ndarray, segm
             if len(cl) < ctx.min_points:
                 continue
             found = recognize(cl, families, lctx, free)
+            if not found:
+                found = coaxial_bands(cl, families, segments, free, lctx)
             if not found and len(cl) >= 3 * ctx.min_points:
                 for piece in ransac_pieces(cl, ctx):
                     got = recognize(piece, families, lctx, free)
@@ -168,6 +172,73 @@ def splitting_phase(families: list[Family], ctx: Context, free: np.ndarray, segm
                 progress(len(cl))
         if not found_any:
             break
+
+
+def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candidate], free: np.ndarray,
+                  ctx: Context) -> list[Candidate]:
+    """Cylinders about the axes of the adjacent segments, for a cluster the
+    normals could not place.
+
+    A small hole or a band a few rows high between two faces has no point
+    whose neighbourhood lies on it alone: its PCA normals are blends and
+    neither the axis estimate nor the vote finds it, while its boundary rows,
+    which lie on it too, went to the faces around it. On CAD parts such a
+    feature is mostly coaxial with, or perpendicular to, a neighbour: take
+    those directions as axes, the circle through the cluster's projection as
+    the placement, and refit on the cluster and the adjacent boundary points
+    that lie on the cylinder (one free row alone does not fix a tilt).
+    """
+    cyl = next((f for f in families if f.name == "cylinder"), None)
+    if cyl is None or not segments or len(cl) < ctx.min_points:
+        return []
+    P = ctx.pre.points
+    owner = np.full(len(P), -1, dtype=np.int64)
+    for j, sg in enumerate(segments):
+        owner[sg.indices] = j
+    k = min(12, len(P))
+    dist, nb = ctx.pre.tree.query(P[cl], k=k, distance_upper_bound=ctx.link)
+    nb = nb[np.isfinite(dist)]
+    adj = np.unique(owner[nb])
+    adj = adj[adj >= 0]
+    border = np.unique(nb[owner[nb] >= 0])
+    axes: list[np.ndarray] = []
+    for j in adj:
+        fr = segments[j].family.frame(segments[j].prim)
+        if fr is None or fr.direction is None:
+            continue
+        a = np.asarray(fr.direction, float)
+        if all(abs(a @ b) < np.cos(np.radians(2.0)) for b in axes):
+            axes.append(a)
+    out = []
+    ext = np.concatenate([cl, border])
+    for a in axes:
+        R = rotation_to_z(a)
+        Q = (P[cl] @ R.T)[:, :2]
+        A = np.c_[2 * Q, np.ones(len(Q))]
+        sol = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0]
+        r2 = sol[2] + sol[:2] @ sol[:2]
+        if not 0 < r2 < ctx.max_radius**2:
+            continue
+        prim = Primitive("cylinder", {"axis_point": R.T @ np.array([sol[0], sol[1], 0.0]), "axis": a,
+                                      "radius": float(np.sqrt(r2))})
+        for _ in range(2):
+            on = ext[cyl.distance(prim, P[ext]) < 2 * ctx.tau]
+            if np.isin(cl, on).mean() < 0.8:
+                break
+            new = cyl.fit(prim, P[on], ctx.pre.normals[on])
+            if new is None or not cyl.valid(new, ctx):
+                break
+            prim = new
+        else:
+            d = cyl.distance(prim, P[cl])
+            ok = d < ctx.tau
+            if ok.mean() < 0.8:
+                continue
+            sel = cl[ok]
+            for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
+                out.append(Candidate(cyl, prim, sel[comp], mean_fitting_error(d[ok][comp], P[sel[comp]]),
+                                     {"d": d[ok][comp]}))
+    return select(out, free, ctx)
 
 
 def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
