@@ -181,7 +181,7 @@ def main(argv=None) -> int:
 
     lines = ["| family | passed | segment DSC ≥ 0.9 | key parameters (median / max rel. error) | "
              "integers exact | max MFE | median s |", "|---|---|---|---|---|---|---|"]
-    for f in fams:
+    for f in fams if rows else []:  # --instances 0: parts only
         rs = [r for r in rows if r["family"] == f]
         keys = sorted({k for r in rs for k in r["errors"]} - set(INTEGER_PARAMS))
         per = []
