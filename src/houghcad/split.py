@@ -21,7 +21,15 @@ from sklearn.cluster import DBSCAN
 from .families import Family
 from .families.base import Primitive
 from .preprocess import rotation_to_z
-from .recognize import Candidate, Context, dense_subsets, mean_fitting_error, recognize, select
+from .recognize import Candidate, Context, dense_subsets, inliers, mean_fitting_error, recognize, select
+
+
+def owners(segments: list[Candidate], n: int) -> np.ndarray:
+    """Index (n,) of the segment that holds each of n points, -1 for none."""
+    owner = np.full(n, -1, dtype=np.int64)
+    for j, s in enumerate(segments):
+        owner[s.indices] = j
+    return owner
 
 
 def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.ndarray]:
@@ -192,9 +200,7 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candida
     if cyl is None or not segments or len(cl) < ctx.min_points:
         return []
     P = ctx.pre.points
-    owner = np.full(len(P), -1, dtype=np.int64)
-    for j, sg in enumerate(segments):
-        owner[sg.indices] = j
+    owner = owners(segments, len(P))
     k = min(12, len(P))
     dist, nb = ctx.pre.tree.query(P[cl], k=k, distance_upper_bound=ctx.link)
     nb = nb[np.isfinite(dist)]
@@ -247,9 +253,7 @@ def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
     rest = np.flatnonzero(free)
     if len(rest) == 0 or not segments:
         return
-    owner = np.full(len(free), -1, dtype=np.int64)
-    for k, s in enumerate(segments):
-        owner[s.indices] = k
+    owner = owners(segments, len(free))
     assigned = np.flatnonzero(owner >= 0)
     P = ctx.pre.points
     dist, j = cKDTree(P[assigned]).query(P[rest], distance_upper_bound=2 * ctx.link)
@@ -277,9 +281,7 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
     if len(segments) < 2:
         return
     P = ctx.pre.points
-    owner = np.full(len(P), -1, dtype=np.int64)
-    for j, s in enumerate(segments):
-        owner[s.indices] = j
+    owner = owners(segments, len(P))
     sizes = np.array([len(s.indices) for s in segments])
     best = owner.copy()
     best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
@@ -333,10 +335,9 @@ def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth
     if len(segments) < 2:
         return np.zeros((0, 2), np.int64)
     P = ctx.pre.points
-    owner = np.full(len(P), -1, dtype=np.int64)
+    owner = owners(segments, len(P))
     sn = np.zeros_like(P)
-    for j, s in enumerate(segments):
-        owner[s.indices] = j
+    for s in segments:
         sn[s.indices] = s.family.surface_normals(s.prim, P[s.indices])
     pts = np.flatnonzero(owner >= 0)
     dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=ctx.link)
@@ -508,20 +509,14 @@ def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool 
     its points so and that ``c`` fits no worse than its own primitive does or,
     with ``own_fit``, no worse than half again ``c``'s fit to its own points."""
     P, N = ctx.pre.points, ctx.pre.normals
+    own = c.family.distance(c.prim, P[c.indices]).mean() if own_fit else 0.0
     out = []
     for j, s in enumerate(pieces):
         Q = s.indices
-        d = c.family.distance(c.prim, P[Q])
-        ok = d < ctx.tau
+        ok, d = inliers(c.family, c.prim, P[Q], N[Q], ctx.tau, ctx.cos_angle)
         if ok.mean() < 0.8:
             continue
-        sn = c.family.surface_normals(c.prim, P[Q[ok]])
-        ok[ok] = np.abs(np.einsum("ij,ij->i", sn, N[Q[ok]])) >= ctx.cos_angle
-        if ok.mean() < 0.8:
-            continue
-        bound = 1.1 * s.family.distance(s.prim, P[Q]).mean() + 0.02 * ctx.tau
-        if own_fit:
-            bound = max(bound, 1.5 * c.family.distance(c.prim, P[c.indices]).mean())
+        bound = max(1.1 * s.family.distance(s.prim, P[Q]).mean() + 0.02 * ctx.tau, 1.5 * own)
         if d[ok].mean() > bound:
             continue
         out.append((j, Q[ok], d[ok]))
