@@ -378,42 +378,76 @@ def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments
     boundaries is voted again by the complex families; a complex candidate
     replaces the segments it explains when it covers at least two of them
     (80 % of each one's points) and fits them no worse than they fit
-    themselves. Complex segments then take the adjacent pieces of their
-    surface (:func:`merge_complex`).
+    themselves. Complex segments, and those of the families voted per
+    cluster, then take the adjacent pieces of their surface
+    (:func:`merge_complex`).
     """
+    if len(segments) < 2:
+        return
     cplx = [f for f in families if not f.simple]
-    if not cplx or len(segments) < 2:
+    # Only noise lets simpler families slice a cone or torus in the
+    # whole-cloud round (on clean samples evaluate()'s gate rejects slices).
+    per_cluster = [f for f in families if f.simple and not f.global_search] if ctx.noisy else []
+    _revote_groups(cplx, per_cluster, ctx, free, segments)
+    merge_complex(segments, ctx, free)
+
+
+def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, free: np.ndarray,
+                   segments: list[Candidate]) -> None:
+    """The complex families' and the per-cluster simple families' vote on
+    each group of tangent-joined segments (see :func:`consolidate`).
+
+    A cone or torus is placed from all the normals of the whole cloud, which
+    suits one of them at most: a second cone of a part comes out in cylinder,
+    sphere and plane bands. Those families are voted on the group as on a
+    cluster (their placements from its normals).
+    """
+    if not cplx and not per_cluster:
         return
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    edges = smooth_adjacency(segments, ctx)
     n = len(segments)
-    g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    ncomp, lab = connected_components(g, directed=False)
     P = ctx.pre.points
     removed = np.zeros(n, bool)
     added: list[Candidate] = []
-    for comp in range(ncomp):
-        members = np.flatnonzero(lab == comp)
-        sizes = np.array([len(segments[m].indices) for m in members])
-        # A carved surface is cut into comparable pieces; a group that one
-        # face dominates (a torus and the plane it meets) is not voted.
-        if len(members) < 2 or sizes.max() > 2 / 3 * sizes.sum():
-            continue
-        region = np.concatenate([segments[m].indices for m in members])
-        avail = np.zeros(len(P), bool)
-        avail[region] = True
+    votes = []
+    if cplx:
         # Voted as a whole cloud (ctx.local False): the families' gates skip a
         # group that is not one complex surface, which most groups of simple
         # faces are not (a plane, a fillet and a plane).
-        for c in recognize(np.sort(region), cplx, ctx, avail):
-            got = _covered(c, [segments[m] for m in members], ctx)
-            got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
-            if len(got) < 2 or _simple_suffices([segments[m] for m, _, _ in got], ctx):
+        votes.append((smooth_adjacency(segments, ctx), cplx, ctx, False))
+    if per_cluster:
+        # The bands of a noisy cone fit to the noise each, and their fitted
+        # normals often disagree at their contacts: after the tangent-joined
+        # groups, any contact joins them, and so the faces of a whole part;
+        # the faces that dominate what remains are set aside in turn.
+        lctx = replace(ctx, local=True)
+        votes.append((smooth_adjacency(segments, ctx), per_cluster, lctx, True))
+        votes.append((smooth_adjacency(segments, ctx, smooth=False), per_cluster, lctx, True))
+    for edges, fams, vctx, peel in votes:
+        g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+        ncomp, lab = connected_components(g, directed=False)
+        for comp in range(ncomp):
+            members = np.flatnonzero((lab == comp) & ~removed)
+            sizes = np.array([len(segments[m].indices) for m in members])
+            # A carved surface is cut into comparable pieces; a face that
+            # dominates its group (the plane a torus meets) is not one of them.
+            while peel and len(members) >= 2 and sizes.max() > 2 / 3 * sizes.sum():
+                keep = np.arange(len(members)) != np.argmax(sizes)
+                members, sizes = members[keep], sizes[keep]
+            if len(members) < 2 or sizes.max() > 2 / 3 * sizes.sum():
                 continue
-            removed[[m for m, _, _ in got]] = True
-            added.append(_union(c, [q for _, q, _ in got], P))
+            region = np.concatenate([segments[m].indices for m in members])
+            avail = np.zeros(len(P), bool)
+            avail[region] = True
+            for c in recognize(np.sort(region), fams, vctx, avail):
+                got = _covered(c, [segments[m] for m in members], ctx)
+                got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
+                if len(got) < 2 or _simple_suffices([segments[m] for m, _, _ in got], ctx):
+                    continue
+                removed[[m for m, _, _ in got]] = True
+                added.append(_union(c, [q for _, q, _ in got], P))
     if added:
         for m in np.flatnonzero(removed):
             free[segments[m].indices] = True
@@ -421,12 +455,17 @@ def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments
             free[c.indices] = False
         segments[:] = [s for m, s in enumerate(segments) if not removed[m]]
         segments.extend(grow(c, free, ctx) for c in added)
-    merge_complex(segments, ctx, free)
 
 
 def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rounds: int = 10) -> None:
-    """Each complex segment takes the smaller adjacent segments that lie on its
-    surface, in place.
+    """Each complex segment, or on a noisy cloud one of a family voted per
+    cluster (cone, torus), takes the adjacent segments that lie on its
+    surface (a complex one only smaller ones), in place.
+
+    On a noisy cloud the whole-cloud round places a cone or torus from all
+    the normals, which fits one of them at most: the others' slices go to
+    simpler families (two cylinder bands of a cone) before a cluster round
+    finds the rest.
 
     Pieces of one complex surface found apart (by different clusters, or
     after a seam cut a group) each fit their own small patch; association
@@ -444,10 +483,13 @@ def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rou
         segs: list[Candidate | None] = list(segments)
         for i in order:
             c = segs[i]
-            if c is None or c.family.simple:
+            if c is None or (c.family.simple and (c.family.global_search or not ctx.noisy)):
                 continue
             nbrs = np.unique(np.r_[edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]])
-            nbrs = [j for j in nbrs.tolist() if segs[j] is not None and len(segs[j].indices) <= len(c.indices)]
+            # A cone or torus piece may be the smallest of its surface's pieces
+            # (the slices came first); a complex segment takes only smaller ones.
+            bound = np.inf if c.family.simple else len(c.indices)
+            nbrs = [j for j in nbrs.tolist() if segs[j] is not None and len(segs[j].indices) <= bound]
             if not nbrs:
                 continue
             got = _covered(c, [segs[j] for j in nbrs], ctx, own_fit=True)
