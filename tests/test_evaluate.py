@@ -344,3 +344,20 @@ def test_decoded_parameters_agree_with_points(name: str):
             dd = x[seg] - p["axis_point"]
             rho = np.linalg.norm(dd - np.outer(dd @ p["axis"], p["axis"]), axis=1)
             assert np.median(rho) == pytest.approx(p["radius"], rel=1e-4), (name, k + 1)
+
+
+def test_parameter_errors_are_zero_on_the_truth_and_measure_a_tilt():
+    from houghcad.evaluate import PARAMETER_TOLERANCES, parameter_errors
+
+    pts = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
+    truth = {"axis_point": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "radius": 1.0}
+    assert all(v == 0 for v in parameter_errors("cylinder", truth, truth, 10.0, pts).values())
+    t = np.radians(2.0)
+    found = {"axis_point": [0.0, 0.0, 0.0], "axis": [np.sin(t), 0.0, np.cos(t)], "radius": 1.05}
+    err = parameter_errors("cylinder", truth, found, 10.0, pts)
+    assert err["axis_deg"] == pytest.approx(2.0)
+    assert err["radius"] == pytest.approx(0.005)
+    assert err["axis_line"] == pytest.approx(2.0 * np.sin(t) / 10.0)  # at the far end of the extent
+    assert set(err) <= set(PARAMETER_TOLERANCES)
+    with pytest.raises(ValueError):
+        parameter_errors("helical_surface", {}, {}, 1.0, pts)

@@ -16,7 +16,7 @@ import pytest
 import houghcad
 from houghcad import synth
 from houghcad.errors import InputError
-from houghcad.evaluate import classification_measures
+from houghcad.evaluate import PARAMETER_TOLERANCES, classification_measures, parameter_errors
 from houghcad.families import REGISTRY, Family, Primitive
 from houghcad.recognize import refine
 from houghcad.result import Result
@@ -33,59 +33,16 @@ def _unit(x) -> np.ndarray:
     return x / np.linalg.norm(x)
 
 
-def _angle_deg(a, b, oriented: bool = False) -> float:
-    c = float(_unit(a) @ _unit(b))
-    c = c if oriented else abs(c)
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
-
-
-def _point_line_distance(q, p, d) -> float:
-    w = _v(q) - _v(p)
-    d = _unit(d)
-    return float(np.linalg.norm(w - (w @ d) * d))
-
-
-def _axis_line_distance(gt: dict, pr: dict, points: np.ndarray) -> float:
-    """Largest distance from the true axis line to the predicted one over the object's extent:
-    the true axis points at the two ends of the points' projection onto the true axis."""
-    a, p = _unit(gt["axis"]), _v(gt["axis_point"])
-    h = (points - p) @ a
-    return max(_point_line_distance(p + t * a, pr["axis_point"], pr["axis"]) for t in (h.min(), h.max()))
+def _angle_deg(a, b) -> float:
+    return float(np.degrees(np.arccos(np.clip(abs(float(_unit(a) @ _unit(b))), 0.0, 1.0))))
 
 
 def param_errors(family: str, gt: dict, pr: dict, diag: float, points: np.ndarray) -> dict[str, float]:
-    """Errors of predicted world parameters ``pr`` against the truth ``gt``.
-
-    Angles in degrees; lengths and positions as fractions of ``diag``. A plane's offset is
-    compared at the object (distance of the true patch centre to the predicted plane), so that a
-    small normal error is not multiplied by the random translation of the pose.
-    """
-    if family == "plane":
-        return {"normal_deg": _angle_deg(gt["normal"], pr["normal"]),
-                "offset": abs(float(_unit(pr["normal"]) @ _v(gt["point"])) - float(pr["offset"])) / diag}
-    if family == "cylinder":
-        return {"axis_deg": _angle_deg(gt["axis"], pr["axis"]),
-                "radius": abs(pr["radius"] - gt["radius"]) / diag,
-                "axis_line": _axis_line_distance(gt, pr, points) / diag}
-    if family == "cone":
-        return {"axis_deg": _angle_deg(gt["axis"], pr["axis"], oriented=True),
-                "half_angle_deg": abs(float(np.degrees(pr["half_angle"] - gt["half_angle"]))),
-                "apex": float(np.linalg.norm(_v(pr["apex"]) - _v(gt["apex"]))) / diag}
-    if family == "sphere":
-        return {"center": float(np.linalg.norm(_v(pr["center"]) - _v(gt["center"]))) / diag,
-                "radius": abs(pr["radius"] - gt["radius"]) / diag}
-    if family == "torus":
-        return {"axis_deg": _angle_deg(gt["axis"], pr["axis"]),
-                "center": float(np.linalg.norm(_v(pr["center"]) - _v(gt["center"]))) / diag,
-                "major": abs(pr["major_radius"] - gt["major_radius"]) / diag,
-                "minor": abs(pr["minor_radius"] - gt["minor_radius"]) / diag}
-    raise ValueError(family)
+    return parameter_errors(family, gt, pr, diag, points)
 
 
 #: The issue's acceptance figures: degrees for *_deg, fractions of the diagonal otherwise.
-ACCEPT = {"normal_deg": 1.0, "axis_deg": 1.0, "half_angle_deg": 1.0,
-          "offset": 0.01, "radius": 0.01, "axis_line": 0.01, "apex": 0.01, "center": 0.01,
-          "major": 0.01, "minor": 0.01}
+ACCEPT = PARAMETER_TOLERANCES
 
 #: "Most of the points": the largest segment must hold at least this fraction of the cloud.
 MIN_COVERAGE = 0.7

@@ -35,6 +35,8 @@ __all__ = [
     "read_fit4cad_parameters",
     "classification_measures",
     "mfe_stats",
+    "parameter_errors",
+    "PARAMETER_TOLERANCES",
     "ground_truth_for",
     "evaluate_files",
     "MEASURES",
@@ -369,6 +371,79 @@ def mfe_stats(result: Result) -> dict[str, float]:
     if mfe.size == 0:
         return {"min": float("nan"), "mean": float("nan"), "max": float("nan")}
     return {"min": float(mfe.min()), "mean": float(mfe.mean()), "max": float(mfe.max())}
+
+
+# --------------------------------------------------------------------------- parameters
+
+#: Issue 2's acceptance figures for simple primitives: degrees for ``*_deg``, fractions of the
+#: cloud's diagonal otherwise.
+PARAMETER_TOLERANCES: dict[str, float] = {
+    "normal_deg": 1.0, "axis_deg": 1.0, "half_angle_deg": 1.0, "offset": 0.01, "radius": 0.01,
+    "axis_line": 0.01, "apex": 0.01, "center": 0.01, "major": 0.01, "minor": 0.01}
+
+
+def _angle_deg(a, b, oriented: bool = False) -> float:
+    c = float(_unit(np.asarray(a, float)) @ _unit(np.asarray(b, float)))
+    return float(np.degrees(np.arccos(np.clip(c if oriented else abs(c), -1.0, 1.0))))
+
+
+def _axis_line_distance(truth: dict, found: dict, points: np.ndarray) -> float:
+    """Largest distance from the true axis line to the found one over the object's extent (the
+    true axis points at both ends of the points' projection onto it)."""
+    a, p = _unit(np.asarray(truth["axis"], float)), np.asarray(truth["axis_point"], float)
+    d, q = _unit(np.asarray(found["axis"], float)), np.asarray(found["axis_point"], float)
+    h = (points - p) @ a
+    out = 0.0
+    for t in (h.min(), h.max()):
+        w = p + t * a - q
+        out = max(out, float(np.linalg.norm(w - (w @ d) * d)))
+    return out
+
+
+def parameter_errors(family: str, truth: dict, found: dict, diagonal: float,
+                     points: np.ndarray) -> dict[str, float]:
+    """Errors of a simple primitive's world parameters ``found`` against ``truth``.
+
+    Parameters
+    ----------
+    family : {"plane", "cylinder", "cone", "sphere", "torus"}
+    truth, found : dict
+        Named parameters as in the JSON output (a plane's truth needs a ``point``).
+    diagonal : float
+        The cloud's bounding-box diagonal (world units).
+    points : ndarray, shape (n, 3)
+        The object's points: the axis-line error is measured over their extent.
+
+    Returns
+    -------
+    dict
+        Angles in degrees (keys ``*_deg``), lengths and positions as fractions of ``diagonal``;
+        compare with :data:`PARAMETER_TOLERANCES`. A plane's offset error is the distance of the
+        true patch's point to the found plane, so a small normal error is not multiplied by the
+        distance of the pose from the origin.
+    """
+    v = lambda x: np.asarray(x, float)  # noqa: E731
+    if family == "plane":
+        return {"normal_deg": _angle_deg(truth["normal"], found["normal"]),
+                "offset": abs(float(_unit(v(found["normal"])) @ v(truth["point"])) - float(found["offset"]))
+                / diagonal}
+    if family == "cylinder":
+        return {"axis_deg": _angle_deg(truth["axis"], found["axis"]),
+                "radius": abs(found["radius"] - truth["radius"]) / diagonal,
+                "axis_line": _axis_line_distance(truth, found, points) / diagonal}
+    if family == "cone":
+        return {"axis_deg": _angle_deg(truth["axis"], found["axis"], oriented=True),
+                "half_angle_deg": abs(float(np.degrees(found["half_angle"] - truth["half_angle"]))),
+                "apex": float(np.linalg.norm(v(found["apex"]) - v(truth["apex"]))) / diagonal}
+    if family == "sphere":
+        return {"center": float(np.linalg.norm(v(found["center"]) - v(truth["center"]))) / diagonal,
+                "radius": abs(found["radius"] - truth["radius"]) / diagonal}
+    if family == "torus":
+        return {"axis_deg": _angle_deg(truth["axis"], found["axis"]),
+                "center": float(np.linalg.norm(v(found["center"]) - v(truth["center"]))) / diagonal,
+                "major": abs(found["major_radius"] - truth["major_radius"]) / diagonal,
+                "minor": abs(found["minor_radius"] - truth["minor_radius"]) / diagonal}
+    raise ValueError(f"parameter_errors: unknown family {family!r}")
 
 
 # --------------------------------------------------------------------------- files
