@@ -37,11 +37,8 @@ def _angle_deg(a, b) -> float:
     return float(np.degrees(np.arccos(np.clip(abs(float(_unit(a) @ _unit(b))), 0.0, 1.0))))
 
 
-def param_errors(family: str, gt: dict, pr: dict, diag: float, points: np.ndarray) -> dict[str, float]:
-    return parameter_errors(family, gt, pr, diag, points)
-
-
-#: The issue's acceptance figures: degrees for *_deg, fractions of the diagonal otherwise.
+#: The issue's acceptance figures (evaluate.PARAMETER_TOLERANCES): degrees for *_deg, fractions
+#: of the diagonal otherwise.
 ACCEPT = PARAMETER_TOLERANCES
 
 #: "Most of the points": the largest segment must hold at least this fraction of the cloud.
@@ -78,7 +75,7 @@ def test_single_primitive_with_one_percent_noise(family, seed):
     summary = [(s.type, len(s.indices)) for s in sorted(res.segments, key=lambda s: -len(s.indices))[:5]]
     assert best.type == family, f"largest segment is a {best.type}: {summary}"
     assert coverage >= MIN_COVERAGE, f"largest {family} covers {coverage:.1%}: {summary}"
-    err = param_errors(family, cloud.primitives[0]["params"], best.params, cloud.diagonal(), cloud.points)
+    err = parameter_errors(family, cloud.primitives[0]["params"], best.params, cloud.diagonal(), cloud.points)
     bad = {k: round(v, 4) for k, v in err.items() if not v <= ACCEPT[k]}
     assert not bad, f"errors beyond the acceptance figures: {bad} (all: { {k: round(v, 4) for k, v in err.items()} })"
     # World coordinates: the segment's points lie on the reported primitive, and the reported MFE
@@ -188,7 +185,7 @@ def test_block_hole_two_parts_one_cylinder(part_runs):
         seg = res.segments[j]
         assert seg.type == "cylinder", f"piece recognised as {seg.type}"
         assert counts.max() >= 0.5 * len(comp)
-        err = param_errors("cylinder", gt, seg.params, cloud.diagonal(), cloud.points[hole])
+        err = parameter_errors("cylinder", gt, seg.params, cloud.diagonal(), cloud.points[hole])
         bad = {kk: round(v, 4) for kk, v in err.items() if not v <= ACCEPT[kk]}
         assert not bad, bad
         found.append(seg)

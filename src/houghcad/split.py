@@ -411,19 +411,20 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
     P = ctx.pre.points
     removed = np.zeros(n, bool)
     added: list[Candidate] = []
+    joined = smooth_adjacency(segments, ctx)
     votes = []
     if cplx:
         # Voted as a whole cloud (ctx.local False): the families' gates skip a
         # group that is not one complex surface, which most groups of simple
         # faces are not (a plane, a fillet and a plane).
-        votes.append((smooth_adjacency(segments, ctx), cplx, ctx, False))
+        votes.append((joined, cplx, ctx, False))
     if per_cluster:
         # The bands of a noisy cone fit to the noise each, and their fitted
         # normals often disagree at their contacts: after the tangent-joined
         # groups, any contact joins them, and so the faces of a whole part;
         # the faces that dominate what remains are set aside in turn.
         lctx = replace(ctx, local=True)
-        votes.append((smooth_adjacency(segments, ctx), per_cluster, lctx, True))
+        votes.append((joined, per_cluster, lctx, True))
         votes.append((smooth_adjacency(segments, ctx, smooth=False), per_cluster, lctx, True))
     for edges, fams, vctx, peel in votes:
         g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
