@@ -322,11 +322,14 @@ def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     big = (size >= 0.9 * size.max()) & (md > 0)
     floor = min(0.8 * ctx.pre.noise, float(md[big].min()) if big.any() else np.inf)
     out = []
-    for c, m in zip(cands, md):
+    for c, m, n in zip(cands, md, size):
         if c.mfe <= 0 or m <= 0:
             out.append(c)
-        else:
-            out.append(replace(c, mfe=c.mfe * max(m - floor, 0.05 * floor) / m))
+            continue
+        # An excess below two standard errors of the mean |d| (0.755 m /
+        # sqrt(n) for Gaussian noise) is the floor itself.
+        least = floor * min(0.05, 1.5 / np.sqrt(max(n, 1)))
+        out.append(replace(c, mfe=c.mfe * max(m - floor, least) / m))
     return out
 
 

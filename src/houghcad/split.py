@@ -322,6 +322,56 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
             segments[j] = replace(s, indices=np.union1d(keep, add))
 
 
+def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, reach: float,
+                       k: int = 12) -> None:
+    """Dissolve, in place, the small segments that their neighbours explain better.
+
+    A sliver along an edge (points whose blurred normals kept them out of
+    both faces) gets its own primitive in the splitting phase, fitted worse
+    than the faces fit the same points. A segment smaller than ``3 *
+    min_points`` is dissolved when every point lies within ``delta`` of a
+    larger adjacent segment's surface (neighbours within ``reach``) and those
+    distances are on average below its own; each point goes to the nearest
+    such surface. A narrow true face (a fillet) fits its own points at least
+    as well and stays.
+    """
+    if len(segments) < 2:
+        return
+    P = ctx.pre.points
+    sizes = np.array([len(s.indices) for s in segments])
+    small = np.flatnonzero(sizes < 3 * ctx.min_points)
+    if len(small) == 0:
+        return
+    owner = owners(segments, len(P))
+    gone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for j in small[np.argsort(sizes[small], kind="stable")]:
+        s = segments[j]
+        idx = s.indices
+        _, nb = ctx.pre.tree.query(P[idx], k=min(k, len(P)), distance_upper_bound=reach)
+        nb = nb[nb < len(P)]
+        adj = np.unique(owner[nb])
+        adj = [int(a) for a in adj if a >= 0 and a != j and a not in gone and sizes[a] > sizes[j]]
+        if not adj:
+            continue
+        d = np.stack([segments[a].family.distance(segments[a].prim, P[idx]) for a in adj])
+        near = d.min(axis=0)
+        own = s.family.distance(s.prim, P[idx])
+        if not (near < delta).all() or near.mean() >= own.mean():
+            continue
+        gone[int(j)] = (idx, np.asarray(adj)[d.argmin(axis=0)])
+    if not gone:
+        return
+    add: dict[int, list[np.ndarray]] = {}
+    for idx, to in gone.values():
+        for a in np.unique(to):
+            add.setdefault(int(a), []).append(idx[to == a])
+    for a, parts in add.items():
+        s = segments[a]
+        segments[a] = replace(s, indices=np.union1d(s.indices, np.concatenate(parts)))
+    for j in sorted(gone, reverse=True):
+        del segments[j]
+
+
 def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth: bool = True) -> np.ndarray:
     """Pairs (m, 2) of segments that meet along a tangent-continuous boundary.
 
@@ -431,24 +481,39 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
         ncomp, lab = connected_components(g, directed=False)
         for comp in range(ncomp):
             members = np.flatnonzero((lab == comp) & ~removed)
+            if peel:
+                # Segments of these families are whole surfaces already.
+                members = np.array([m for m in members if segments[m].family not in fams], dtype=np.int64)
             sizes = np.array([len(segments[m].indices) for m in members])
             # A carved surface is cut into comparable pieces; a face that
             # dominates its group (the plane a torus meets) is not one of them.
-            while peel and len(members) >= 2 and sizes.max() > 2 / 3 * sizes.sum():
+            # Where the vote takes nothing, the largest face is set aside too
+            # (twice at most): the placement from the group's normals suits
+            # one surface of it, which need not be the carved one.
+            retries = 2
+            while True:
+                while peel and len(members) >= 2 and sizes.max() > 2 / 3 * sizes.sum():
+                    keep = np.arange(len(members)) != np.argmax(sizes)
+                    members, sizes = members[keep], sizes[keep]
+                if len(members) < 2 or sizes.max() > 2 / 3 * sizes.sum():
+                    break
+                region = np.concatenate([segments[m].indices for m in members])
+                avail = np.zeros(len(P), bool)
+                avail[region] = True
+                took = False
+                for c in recognize(np.sort(region), fams, vctx, avail):
+                    got = _covered(c, [segments[m] for m in members], ctx)
+                    got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
+                    if len(got) < 2 or _simple_suffices([segments[m] for m, _, _ in got], ctx):
+                        continue
+                    removed[[m for m, _, _ in got]] = True
+                    added.append(_union(c, [q for _, q, _ in got], P))
+                    took = True
+                if took or not peel or retries == 0:
+                    break
+                retries -= 1
                 keep = np.arange(len(members)) != np.argmax(sizes)
                 members, sizes = members[keep], sizes[keep]
-            if len(members) < 2 or sizes.max() > 2 / 3 * sizes.sum():
-                continue
-            region = np.concatenate([segments[m].indices for m in members])
-            avail = np.zeros(len(P), bool)
-            avail[region] = True
-            for c in recognize(np.sort(region), fams, vctx, avail):
-                got = _covered(c, [segments[m] for m in members], ctx)
-                got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
-                if len(got) < 2 or _simple_suffices([segments[m] for m, _, _ in got], ctx):
-                    continue
-                removed[[m for m, _, _ in got]] = True
-                added.append(_union(c, [q for _, q, _ in got], P))
     if added:
         for m in np.flatnonzero(removed):
             free[segments[m].indices] = True
