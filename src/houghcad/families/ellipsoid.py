@@ -359,7 +359,7 @@ def covered_by_simple(fam: Family, prim: Primitive, P: np.ndarray, ctx) -> bool:
     _, j = ctx.pre.tree.query(P)
     N = ctx.pre.normals[j]
     rng = np.random.default_rng(ctx.seed)
-    sel = np.arange(len(P)) if len(P) <= 800 else rng.choice(len(P), 800, replace=False)
+    sel = np.arange(len(P)) if len(P) <= 400 else rng.choice(len(P), 400, replace=False)
     P, N = P[sel], N[sel]
     d_cplx = float(fam.distance(prim, P).mean())
     errs = simple_fit_errors(P, N)

@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Primitive, planes_intersection, register, unit
 from .generalized_cylinder import (B_MAX, B_MIN, N_VALUES, DirectrixPlacement, active_order, best_order, debias_b,
-                                   normalise_shape, phase_frame, polar_fit, polar_local, ref_basis, sampson,
+                                   normalise_shape, phase_frame, polar_fit, polar_local, ref_basis,
                                    vote_grid)
 
 
@@ -191,18 +191,66 @@ class GeneralizedCone(Family):
         def unpack(x):
             return p0["apex"] + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5], x[6], x[7]
 
+        def frame(x):
+            ax = unit(a0 + x[3] * e1 + x[4] * e2)
+            f1 = e1 - (e1 @ ax) * ax
+            f1 = f1 / np.linalg.norm(f1)
+            return f1, np.cross(ax, f1), ax
+
+        state: dict = {}
+
         def res(x):
-            apex, ax, s, b, phi = unpack(x)
-            f1, f2, _ = ref_basis(ax, e1)
+            apex = p0["apex"] + x[:3]
+            s, b, phi = x[5], x[6], x[7]
+            f1, f2, ax = frame(x)
             v = P - apex
             X, Y, Z = v @ f1, v @ f2, v @ ax
-            rho, th = np.hypot(X, Y), np.arctan2(Y, X) - phi
-            g = 1.0 + b * np.cos(n * th)
-            return sampson(rho * g - s * Z, g**2 + (b * n * np.sin(n * th)) ** 2 + s * s)
+            rho = np.maximum(np.hypot(X, Y), 1e-12)
+            th = np.arctan2(Y, X) - phi
+            cn, sn = np.cos(n * th), np.sin(n * th)
+            g = 1.0 + b * cn
+            t = b * n * sn
+            G = np.sqrt(np.maximum(g**2 + t**2 + s * s, 1e-24))
+            r = (rho * g - s * Z) / G  # Sampson distance F / |∇F| of F = ρ g(θ) − s z
+            state.update(x=x.copy(), v=v, X=X, Y=Y, Z=Z, rho=rho, cn=cn, sn=sn, g=g, t=t, G=G, r=r,
+                         f=(f1, f2, ax))
+            return r
+
+        def jac(x):
+            # Analytic but for the frame's turn with the axis (3-vectors,
+            # finite differences): a numerical Jacobian costs 9 residuals.
+            if "x" not in state or not np.array_equal(state["x"], x):
+                res(x)
+            st = state
+            f1, f2, ax = st["f"]
+            X, Y, Z, rho, cn, sn, g, t, G, r = (st[k] for k in ("X", "Y", "Z", "rho", "cn", "sn", "g", "t", "G", "r"))
+            m = len(X)
+            dX, dY, dZ = np.zeros((8, m)), np.zeros((8, m)), np.zeros((8, m))
+            for j in range(3):
+                dX[j], dY[j], dZ[j] = -f1[j], -f2[j], -ax[j]
+            h = 1e-7
+            for j in (3, 4):
+                xe = x.copy()
+                xe[j] += h
+                g1, g2, g3 = frame(xe)
+                v = st["v"]
+                dX[j], dY[j], dZ[j] = v @ ((g1 - f1) / h), v @ ((g2 - f2) / h), v @ ((g3 - ax) / h)
+            s, b = x[5], x[6]
+            dth = (X * dY - Y * dX) / (rho * rho)
+            dth[7] -= 1.0
+            drho = (X * dX + Y * dY) / rho
+            ds, db = np.zeros((8, 1)), np.zeros((8, 1))
+            ds[5], db[6] = 1.0, 1.0
+            dg = cn * db - b * n * sn * dth
+            dt = n * sn * db + b * n * n * cn * dth
+            dF = drho * g + rho * dg - ds * Z - s * dZ
+            dG = (g * dg + t * dt + s * ds) / G
+            J = ((dF - r * dG) / G).T
+            return np.where(np.isfinite(J), J, 0.0)
 
         x0 = np.array([0, 0, 0, 0, 0, p0["a"], p0["b"], 0.0])
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=80)
+            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=80)
         except Exception:
             return None
         apex, ax, s, b, phi = unpack(sol.x)

@@ -185,11 +185,6 @@ def phase_frame(R: np.ndarray, phi: float) -> np.ndarray:
     return np.stack([e1, np.cross(R[2], e1), R[2]])
 
 
-def sampson(F: np.ndarray, grad2: np.ndarray) -> np.ndarray:
-    """First-order (Sampson) distance F / |∇F|."""
-    return F / np.sqrt(np.maximum(grad2, 1e-24))
-
-
 def debias_b(b: float, n: int, residuals: np.ndarray, rho: np.ndarray) -> float:
     """b corrected for the curvature bias of a least-squares fit to noisy points.
 
@@ -332,19 +327,71 @@ class GeneralizedCylinder(Family):
             ax = unit(a0 + x[0] * e1 + x[1] * e2)
             return ax, c0 + x[2] * e1 + x[3] * e2, x[4], x[5], x[6]
 
+        def frame(x):
+            ax = unit(a0 + x[0] * e1 + x[1] * e2)
+            f1 = e1 - (e1 @ ax) * ax
+            f1 = f1 / np.linalg.norm(f1)
+            return f1, np.cross(ax, f1)
+
+        state: dict = {}
+
         def res(x):
-            ax, c, a, b, phi = unpack(x)
-            f1, f2, _ = ref_basis(ax, e1)
+            c = c0 + x[2] * e1 + x[3] * e2
+            a, b, phi = x[4], x[5], x[6]
+            f1, f2 = frame(x)
             v = P - c
             X, Y = v @ f1, v @ f2
-            rho, th = np.hypot(X, Y), np.arctan2(Y, X) - phi
-            g = 1.0 + b * np.cos(n * th)
-            return sampson(rho * g - a, g**2 + (b * n * np.sin(n * th)) ** 2)
+            rho = np.maximum(np.hypot(X, Y), 1e-12)
+            th = np.arctan2(Y, X) - phi
+            cn, sn = np.cos(n * th), np.sin(n * th)
+            g = 1.0 + b * cn
+            s = b * n * sn
+            G = np.sqrt(np.maximum(g**2 + s**2, 1e-24))
+            r = (rho * g - a) / G  # Sampson distance F / |∇F| of F = ρ g(θ) − a
+            state.update(x=x.copy(), v=v, X=X, Y=Y, rho=rho, cn=cn, sn=sn, g=g, s=s, G=G, r=r, f=(f1, f2))
+            return r
+
+        def jac(x):
+            # Analytic but for the frame's turn with the axis (3-vectors,
+            # finite differences): a numerical Jacobian costs 8 residuals.
+            if "x" not in state or not np.array_equal(state["x"], x):
+                res(x)
+            t = state
+            f1, f2 = t["f"]
+            X, Y, rho, cn, sn, g, s, G, r = (t[k] for k in ("X", "Y", "rho", "cn", "sn", "g", "s", "G", "r"))
+            dX, dY = np.empty((7, len(X))), np.empty((7, len(X)))
+            h = 1e-7
+            for j in (0, 1):
+                xe = x.copy()
+                xe[j] += h
+                g1, g2 = frame(xe)
+                dX[j], dY[j] = t["v"] @ ((g1 - f1) / h), t["v"] @ ((g2 - f2) / h)
+            for j, e in ((2, e1), (3, e2)):
+                dX[j], dY[j] = -(e @ f1), -(e @ f2)
+            dX[4:], dY[4:] = 0.0, 0.0
+            r2 = rho * rho
+            dth = (X * dY - Y * dX) / r2
+            dth[6] -= 1.0
+            drho = (X * dX + Y * dY) / rho
+            b = x[5]
+            db = np.zeros((7, 1))
+            db[5] = 1.0
+            dg = cn * db - b * n * sn * dth
+            ds = n * sn * db + b * n * n * cn * dth
+            dF = drho * g + rho * dg
+            dF[4] -= 1.0
+            dG = (g * dg + s * ds) / G
+            J = ((dF - r * dG) / G).T
+            return np.where(np.isfinite(J), J, 0.0)
 
         x0 = np.array([0, 0, 0, 0, p0["a"], p0["b"], 0.0])
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=60)
+            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=30)
         except Exception:
+            return None
+        # On its surface the fit settles in a few evaluations; one that runs
+        # to the limit is on another surface.
+        if sol.status == 0:
             return None
         ax, c, a, b, phi = unpack(sol.x)
         if not (np.isfinite(sol.x).all() and a > 0):
