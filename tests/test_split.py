@@ -200,3 +200,36 @@ def test_small_holes_are_found_about_the_plate_normal():
         best = int(np.bincount(own).argmax())
         dsc = 2 * np.sum(lab[g] == best) / (len(g) + len(faces[best]))
         assert types[best] == "cylinder" and dsc > 0.9, (types[best], dsc)
+
+
+def test_noisy_coverage_is_judged_over_all_the_points_not_the_inliers():
+    # On a noisy cloud, a surface half a noise sigma off a face keeps more
+    # than 80 % of its points within tau (3 sigma), and their truncated mean
+    # is within the old bound of the face's own (12 % above it over all the
+    # points): the test over all the points rejects it.
+    from houghcad.families import REGISTRY
+    from houghcad.recognize import Candidate
+    from houghcad.split import _covered
+
+    cloud = synth.single("plane", 0, n_points=3000, noise=0.01)
+    ctx = _context(cloud.points)
+    assert ctx.noisy
+    fam = REGISTRY["plane"]
+    idx = np.arange(len(cloud.points))
+    P, N = ctx.pre.points, ctx.pre.normals
+    own = fam.fit(_seed_plane(P), P, N)
+    piece = Candidate(fam, own, idx, 0.0, {})
+    sigma = float(np.std(P @ own.params["normal"] - own.params["offset"]))
+    off = replace(own, params={**own.params, "offset": own.params["offset"] + 0.5 * sigma})
+    cand = Candidate(fam, off, idx, 0.0, {})
+    assert len(_covered(cand, [piece], ctx, strict=False)) == 1  # the truncated test lets it through
+    assert _covered(cand, [piece], ctx) == []
+    assert len(_covered(piece, [piece], ctx)) == 1  # the face's own primitive still covers it
+
+
+def _seed_plane(P):
+    from houghcad.families.base import Primitive
+
+    c = P.mean(axis=0)
+    n = np.linalg.eigh(np.cov((P - c).T))[1][:, 0]
+    return Primitive("plane", {"normal": n, "offset": float(n @ c), "point": c})

@@ -605,17 +605,18 @@ def _simple_suffices(pieces: list[Candidate], ctx: Context) -> bool:
         prim = s.family.fit(s.prim, ctx.pre.points[sel], ctx.pre.normals[sel])
         if prim is None or not s.family.valid(prim, ctx):
             continue
-        if len(_covered(replace(s, prim=prim), pieces, ctx)) == len(pieces):
+        if len(_covered(replace(s, prim=prim), pieces, ctx, strict=False)) == len(pieces):
             return True
     return False
 
 
-def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool = False) \
+def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool = False, strict: bool = True) \
         -> list[tuple[int, np.ndarray, np.ndarray]]:
     """The pieces that candidate ``c`` explains: (position, points within tau
     with compatible normals, their distances) for each piece that has 80 % of
     its points so and that ``c`` fits no worse than its own primitive does or,
-    with ``own_fit``, no worse than half again ``c``'s fit to its own points."""
+    with ``own_fit``, no worse than half again ``c``'s fit to its own points.
+    ``strict`` (noisy clouds): also over all the piece's points (see below)."""
     P, N = ctx.pre.points, ctx.pre.normals
     own = c.family.distance(c.prim, P[c.indices]).mean() if own_fit else 0.0
     out = []
@@ -624,9 +625,19 @@ def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool 
         ok, d = inliers(c.family, c.prim, P[Q], N[Q], ctx.tau, ctx.cos_angle)
         if ok.mean() < 0.8:
             continue
-        bound = max(1.1 * s.family.distance(s.prim, P[Q]).mean() + 0.02 * ctx.tau, 1.5 * own)
+        mine = s.family.distance(s.prim, P[Q]).mean()
+        bound = max(1.1 * mine + 0.02 * ctx.tau, 1.5 * own)
         if d[ok].mean() > bound:
             continue
+        if strict and ctx.noisy and not own_fit:
+            # The mean over the inliers within tau (3 σ) is truncated: a
+            # surface a noise σ off the piece still passes the test above.
+            # Over all the piece's points, c must fit as well as the piece's
+            # own primitive, or the noise where that fits below it (a slice
+            # chosen for being close), within two standard errors.
+            ref = max(mine, 0.8 * ctx.pre.noise)
+            if c.family.distance(c.prim, P[Q]).mean() > ref * (1.0 + 1.5 / np.sqrt(len(Q))):
+                continue
         out.append((j, Q[ok], d[ok]))
     return out
 
