@@ -636,7 +636,7 @@ def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool 
             # own primitive, or the noise where that fits below it (a slice
             # chosen for being close), within two standard errors.
             ref = max(mine, 0.8 * ctx.pre.noise)
-            if c.family.distance(c.prim, P[Q]).mean() > ref * (1.0 + 1.5 / np.sqrt(len(Q))):
+            if d.mean() > ref * (1.0 + 1.5 / np.sqrt(len(Q))):
                 continue
         out.append((j, Q[ok], d[ok]))
     return out

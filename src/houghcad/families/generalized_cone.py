@@ -22,8 +22,8 @@ from scipy.spatial import cKDTree
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Primitive, planes_intersection, register, unit
 from .generalized_cylinder import (B_MAX, B_MIN, N_VALUES, DirectrixPlacement, active_order, best_order, debias_b,
-                                   normalise_shape, phase_frame, polar_fit, polar_local, ref_basis,
-                                   vote_grid)
+                                   frame_turn_rows, normalise_shape, phase_frame, polar_fit, polar_local,
+                                   polar_rows, ref_basis, vote_grid)
 
 
 def projected(Pl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,10 +192,7 @@ class GeneralizedCone(Family):
             return p0["apex"] + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5], x[6], x[7]
 
         def frame(x):
-            ax = unit(a0 + x[3] * e1 + x[4] * e2)
-            f1 = e1 - (e1 @ ax) * ax
-            f1 = f1 / np.linalg.norm(f1)
-            return f1, np.cross(ax, f1), ax
+            return ref_basis(a0 + x[3] * e1 + x[4] * e2, e1)
 
         state: dict = {}
 
@@ -217,32 +214,20 @@ class GeneralizedCone(Family):
             return r
 
         def jac(x):
-            # Analytic but for the frame's turn with the axis (3-vectors,
-            # finite differences): a numerical Jacobian costs 9 residuals.
+            # Analytic but for the frame's turn with the axis: a numerical
+            # Jacobian costs 9 residuals.
             if "x" not in state or not np.array_equal(state["x"], x):
                 res(x)
             st = state
             f1, f2, ax = st["f"]
             X, Y, Z, rho, cn, sn, g, t, G, r = (st[k] for k in ("X", "Y", "Z", "rho", "cn", "sn", "g", "t", "G", "r"))
-            m = len(X)
-            dX, dY, dZ = np.zeros((8, m)), np.zeros((8, m)), np.zeros((8, m))
+            dX, dY, dZ = frame_turn_rows(frame, x, st["v"], (3, 4))
             for j in range(3):
                 dX[j], dY[j], dZ[j] = -f1[j], -f2[j], -ax[j]
-            h = 1e-7
-            for j in (3, 4):
-                xe = x.copy()
-                xe[j] += h
-                g1, g2, g3 = frame(xe)
-                v = st["v"]
-                dX[j], dY[j], dZ[j] = v @ ((g1 - f1) / h), v @ ((g2 - f2) / h), v @ ((g3 - ax) / h)
-            s, b = x[5], x[6]
-            dth = (X * dY - Y * dX) / (rho * rho)
-            dth[7] -= 1.0
-            drho = (X * dX + Y * dY) / rho
-            ds, db = np.zeros((8, 1)), np.zeros((8, 1))
-            ds[5], db[6] = 1.0, 1.0
-            dg = cn * db - b * n * sn * dth
-            dt = n * sn * db + b * n * n * cn * dth
+            s = x[5]
+            drho, dg, dt = polar_rows(X, Y, rho, cn, sn, x[6], n, dX, dY, b_col=6, phi_col=7)
+            ds = np.zeros((len(x), 1))
+            ds[5] = 1.0
             dF = drho * g + rho * dg - ds * Z - s * dZ
             dG = (g * dg + t * dt + s * ds) / G
             J = ((dF - r * dG) / G).T

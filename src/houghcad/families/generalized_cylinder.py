@@ -215,6 +215,37 @@ def ref_basis(axis: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return e1, np.cross(a, e1), a
 
 
+def frame_turn_rows(frame, x: np.ndarray, v: np.ndarray, tilt: tuple[int, ...], h: float = 1e-7) -> np.ndarray:
+    """Rows (3, k, m) of the derivatives of v @ f for each vector f of the
+    frame ``frame(x)`` (a tuple of 3-vectors) with respect to the k
+    parameters x; only the ``tilt`` columns turn the frame (finite
+    differences on 3-vectors, cheap), the others are zero. ``v`` (m, 3)."""
+    base = frame(x)
+    out = np.zeros((len(base), len(x), len(v)))
+    for j in tilt:
+        xe = x.copy()
+        xe[j] += h
+        for i, (fe, f0) in enumerate(zip(frame(xe), base)):
+            out[i, j] = v @ ((fe - f0) / h)
+    return out
+
+
+def polar_rows(X: np.ndarray, Y: np.ndarray, rho: np.ndarray, cn: np.ndarray, sn: np.ndarray, b: float,
+               n: int, dX: np.ndarray, dY: np.ndarray, b_col: int, phi_col: int):
+    """Rows (k, m) of dρ, dg and dt for g = 1 + b cos nθ, t = b n sin nθ, with
+    θ = atan2(Y, X) − φ, from the rows dX, dY (k, m) of the section
+    coordinates; b and φ are the parameters in columns ``b_col``, ``phi_col``.
+    Shared by the generalised cylinder's and cone's Sampson Jacobians."""
+    dth = (X * dY - Y * dX) / (rho * rho)
+    dth[phi_col] -= 1.0
+    drho = (X * dX + Y * dY) / rho
+    db = np.zeros((len(dX), 1))
+    db[b_col] = 1.0
+    dg = cn * db - b * n * sn * dth
+    dt = n * sn * db + b * n * n * cn * dth
+    return drho, dg, dt
+
+
 def vote_grid(n: int, rho_hi: float, cell: float, rho_typ: float) -> Grid:
     """Grid over (n, b, a): n a single bin (it comes from the placement), b in
     [0, B_MAX] at a step that moves a by about a cell, a in [0, rho_hi]."""
@@ -328,17 +359,14 @@ class GeneralizedCylinder(Family):
             return ax, c0 + x[2] * e1 + x[3] * e2, x[4], x[5], x[6]
 
         def frame(x):
-            ax = unit(a0 + x[0] * e1 + x[1] * e2)
-            f1 = e1 - (e1 @ ax) * ax
-            f1 = f1 / np.linalg.norm(f1)
-            return f1, np.cross(ax, f1)
+            return ref_basis(a0 + x[0] * e1 + x[1] * e2, e1)
 
         state: dict = {}
 
         def res(x):
             c = c0 + x[2] * e1 + x[3] * e2
             a, b, phi = x[4], x[5], x[6]
-            f1, f2 = frame(x)
+            f1, f2, _ = frame(x)
             v = P - c
             X, Y = v @ f1, v @ f2
             rho = np.maximum(np.hypot(X, Y), 1e-12)
@@ -352,32 +380,17 @@ class GeneralizedCylinder(Family):
             return r
 
         def jac(x):
-            # Analytic but for the frame's turn with the axis (3-vectors,
-            # finite differences): a numerical Jacobian costs 8 residuals.
+            # Analytic but for the frame's turn with the axis: a numerical
+            # Jacobian costs 8 residuals.
             if "x" not in state or not np.array_equal(state["x"], x):
                 res(x)
             t = state
             f1, f2 = t["f"]
             X, Y, rho, cn, sn, g, s, G, r = (t[k] for k in ("X", "Y", "rho", "cn", "sn", "g", "s", "G", "r"))
-            dX, dY = np.empty((7, len(X))), np.empty((7, len(X)))
-            h = 1e-7
-            for j in (0, 1):
-                xe = x.copy()
-                xe[j] += h
-                g1, g2 = frame(xe)
-                dX[j], dY[j] = t["v"] @ ((g1 - f1) / h), t["v"] @ ((g2 - f2) / h)
+            dX, dY, _ = frame_turn_rows(frame, x, t["v"], (0, 1))
             for j, e in ((2, e1), (3, e2)):
                 dX[j], dY[j] = -(e @ f1), -(e @ f2)
-            dX[4:], dY[4:] = 0.0, 0.0
-            r2 = rho * rho
-            dth = (X * dY - Y * dX) / r2
-            dth[6] -= 1.0
-            drho = (X * dX + Y * dY) / rho
-            b = x[5]
-            db = np.zeros((7, 1))
-            db[5] = 1.0
-            dg = cn * db - b * n * sn * dth
-            ds = n * sn * db + b * n * n * cn * dth
+            drho, dg, ds = polar_rows(X, Y, rho, cn, sn, x[5], n, dX, dY, b_col=5, phi_col=6)
             dF = drho * g + rho * dg
             dF[4] -= 1.0
             dG = (g * dg + s * ds) / G
