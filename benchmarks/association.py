@@ -22,19 +22,14 @@ ground-truth face holding most of their points. The summary goes between the
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import multiprocessing as mp
-import shlex
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from fit4cad import replace_section  # the scripts run from benchmarks/, beside fit4cad.py
+from fit4cad import publish_section  # the scripts run from benchmarks/, beside fit4cad.py
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-BENCHMARKS_MD = REPO_ROOT / "BENCHMARKS.md"
 PARTS = ("plate_with_holes", "gear_like", "shaft_with_groove", "mirrored_cones")
 
 
@@ -105,24 +100,11 @@ def main(argv=None) -> int:
             lines.append(f"| {p} | {nz} | {sum(r[3] for r in rs)}/{len(rs)} | {miss} |")
     assoc = np.array([r[6] for r in rows])
     total = sum(r[3] for r in rows)
-    cmd = "python benchmarks/association.py " + " ".join(shlex.quote(x) for x in (argv or sys.argv[1:]))
-    section = "\n".join([
-        "<!-- association:begin -->",
-        "## Association on synthetic parts (issue 4)",
-        "",
-        f"- Date: {_dt.date.today().isoformat()}",
-        f"- Command: `{cmd.strip()}`",
+    publish_section("association", "Association on synthetic parts (issue 4)", "association.py", argv, [
         f"- {a.points} points per part, seeds 0–{a.seeds - 1}; whole pipeline, groups checked member by member.",
         f"- Exact recovery: {total}/{len(rows)} cases. Association step time: median "
         f"{np.median(assoc) * 1000:.0f} ms, max {assoc.max() * 1000:.0f} ms.",
-        "",
-        *lines,
-        "<!-- association:end -->",
-        "",
-    ])
-    print(section)
-    if not a.no_write:
-        replace_section(BENCHMARKS_MD, "association", section)
+    ], lines, not a.no_write)
     return 0
 
 

@@ -27,19 +27,14 @@ The summary goes between the ``<!-- complex:begin/end -->`` markers of BENCHMARK
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import multiprocessing as mp
-import shlex
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from fit4cad import replace_section  # the scripts run from benchmarks/, beside fit4cad.py
+from fit4cad import publish_section  # the scripts run from benchmarks/, beside fit4cad.py
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-BENCHMARKS_MD = REPO_ROOT / "BENCHMARKS.md"
 
 #: Parameters compared with the ground truth, per family (world units). Integers must be exact,
 #: other values within ``REL_TOL`` relative; vectors are compared sorted, element-wise.
@@ -207,26 +202,12 @@ def main(argv=None) -> int:
                 worst = max((r["max_mfe"] for r in rs if np.isfinite(r["max_mfe"])), default=float("nan"))
                 plines.append(f"| {p} | {nz:g} | {np.mean([r['dsc'] for r in rs]):.3f} | {per_seed} | {worst:.4f} | "
                               f"{np.median([r['seconds'] for r in rs]):.1f} |")
-    cmd = "python benchmarks/complex.py " + " ".join(shlex.quote(x) for x in (argv or sys.argv[1:]))
-    section = "\n".join([
-        "<!-- complex:begin -->",
-        "## Complex families (issue 3)",
-        "",
-        f"- Date: {_dt.date.today().isoformat()}",
-        f"- Command: `{cmd.strip()}`",
+    publish_section("complex", "Complex families (issue 3)", "complex.py", argv, [
         f"- {a.instances} instances per family, {a.points} points, noise σ = {a.noise} × diagonal, "
         f"{a.missing:.0%} of the surface cut away, random pose and scale; `segment(families=\"all\")`.",
         f"- Pass: a segment of the right type with DSC ≥ {DSC_MIN} and key parameters within "
         f"{REL_TOL:.0%} (integers exact). Targets: ≥ 95 % of instances; MFE ≤ 0.01.",
-        "",
-        *lines,
-        *plines,
-        "<!-- complex:end -->",
-        "",
-    ])
-    print(section)
-    if not a.no_write:
-        replace_section(BENCHMARKS_MD, "complex", section)
+    ], lines + plines, not a.no_write)
     return 0
 
 

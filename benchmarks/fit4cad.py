@@ -420,6 +420,30 @@ def replace_section(md_path: Path, marker: str, section: str) -> None:
     atomic_write(md_path, text)
 
 
+def publish_section(marker: str, title: str, script: str, argv: list[str] | None, notes: list[str],
+                    body: list[str], write: bool) -> str:
+    """The BENCHMARKS.md section of the synthetic benchmark scripts: markers, title, date, the
+    command that produced it (``script`` with ``argv``), ``notes`` (bullet lines) and ``body``;
+    printed, and written between the markers when ``write``."""
+    cmd = f"python benchmarks/{script} " + " ".join(shlex.quote(x) for x in (argv or sys.argv[1:]))
+    section = "\n".join([
+        f"<!-- {marker}:begin -->",
+        f"## {title}",
+        "",
+        f"- Date: {_dt.date.today().isoformat()}",
+        f"- Command: `{cmd.strip()}`",
+        *notes,
+        "",
+        *body,
+        f"<!-- {marker}:end -->",
+        "",
+    ])
+    print(section)
+    if write:
+        replace_section(BENCHMARKS_MD, marker, section)
+    return section
+
+
 def rows_csv(rows: list[dict[str, Any]]) -> str:
     buf = io.StringIO()
     wr = csv.writer(buf, lineterminator="\n")

@@ -18,19 +18,14 @@ The summary goes between the ``<!-- singles:begin/end -->`` markers of BENCHMARK
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import multiprocessing as mp
-import shlex
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from fit4cad import replace_section  # the scripts run from benchmarks/, beside fit4cad.py
+from fit4cad import publish_section  # the scripts run from benchmarks/, beside fit4cad.py
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-BENCHMARKS_MD = REPO_ROOT / "BENCHMARKS.md"
 MIN_COVERAGE = 0.7
 
 
@@ -88,26 +83,13 @@ def main(argv=None) -> int:
                              for r in rs if not r["ok"])
             lines.append(f"| {f} | {nz:g} | {sum(r['ok'] for r in rs)}/{len(rs)} | {worst} | {miss} | "
                          f"{np.median([r['seconds'] for r in rs]):.1f} |")
-    cmd = "python benchmarks/singles.py " + " ".join(shlex.quote(x) for x in (argv or sys.argv[1:]))
-    section = "\n".join([
-        "<!-- singles:begin -->",
-        "## Simple primitives (issue 2)",
-        "",
-        f"- Date: {_dt.date.today().isoformat()}",
-        f"- Command: `{cmd.strip()}`",
+    publish_section("singles", "Simple primitives (issue 2)", "singles.py", argv, [
         f"- {a.seeds} seeds per family and noise level, {a.points} points, random pose and scale; "
         "`segment(points)`.",
         f"- Pass: the largest segment has the right type, ≥ {MIN_COVERAGE:.0%} of the points, radius / offset / "
         "centre / apex / axis-line errors ≤ 1 % of the diagonal, axis, normal and half-angle errors ≤ 1°. "
         "Angles in degrees, lengths as fractions of the diagonal.",
-        "",
-        *lines,
-        "<!-- singles:end -->",
-        "",
-    ])
-    print(section)
-    if not a.no_write:
-        replace_section(BENCHMARKS_MD, "singles", section)
+    ], lines, not a.no_write)
     return 0
 
 
