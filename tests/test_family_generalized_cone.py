@@ -77,12 +77,11 @@ def test_composite_part_structure():
     assert len(n) == 1
 
 
-@pytest.mark.xfail(reason="measured on seeds 0-2 (8000 points, noise 0.002): the three curved faces come out as "
-                   "planes, cylinders, spheres or one generalised cylinder (DSC 0.29-0.81 for the generalised cylinders, "
-                   "0.31-0.55 for the cone): the global round's directrix fit sees both cylinders and the cone at once",
-                   strict=False)
-def test_composite_part_recognised():
-    c = synth.PARTS["generalized_cone_part"](seed=0, n_points=5000, noise=0.002)
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.xfail(
+    reason="measured (5000 points, noise 0.002): the cone comes out as a plane (DSC 0.36); seeds 0 and 2 pass with "
+           "DSC 0.92-0.97 for all three curved faces", strict=False)), 2])
+def test_composite_part_recognised(seed):
+    c = synth.PARTS["generalized_cone_part"](seed=seed, n_points=5000, noise=0.002)
     r = houghcad.segment(c.points, families="all")
     for k, p in enumerate(c.primitives[:3]):
         truth = np.flatnonzero(c.labels == k)

@@ -72,3 +72,36 @@ def test_simple_singles_stay_simple(family, seed):
     res = houghcad.segment(cloud.points, families="all", seed=0)
     big = max(res.segments, key=lambda s: len(s.indices))
     assert big.type == family
+
+
+def test_trimmed_complex_sees_the_screw_of_a_noisy_threaded_part():
+    # The ends of the threaded sector (two planes, a tenth of the part) keep the
+    # whole cloud's complex above the global gate; left out, the rest is one screw.
+    from houghcad.families._helix import GLOBAL_COMPLEX_RESIDUAL, NOISY_TRIM, screw_placement
+    from houghcad.preprocess import preprocess
+
+    c = synth.PARTS["screw_part"](seed=1, n_points=6000, noise=0.005)
+    pre = preprocess(c.points)
+    _, _, res = screw_placement(pre.points, pre.normals)
+    pl, p, res_t = screw_placement(pre.points, pre.normals, NOISY_TRIM)
+    assert res > GLOBAL_COMPLEX_RESIDUAL > 5 * res_t
+    gt = pre.transform.R @ np.asarray(c.primitives[0]["params"]["axis"], float)
+    assert np.degrees(np.arccos(min(1.0, abs(pl.R[2] @ gt)))) < 1.0
+    pitch = c.primitives[0]["params"]["k1"] * c.primitives[0]["params"]["n"] * pre.transform.scale
+    assert abs(abs(p) - pitch) < 0.1 * pitch
+    # A part of several surfaces of revolution and planes is still no screw.
+    e = synth.PARTS["ellipsoid_part"](seed=1, n_points=6000, noise=0.005)
+    pre = preprocess(e.points)
+    assert screw_placement(pre.points, pre.normals, NOISY_TRIM)[2] > GLOBAL_COMPLEX_RESIDUAL
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_thread_of_a_noisy_screw_part_is_one_helical_surface(seed):
+    c = synth.PARTS["screw_part"](seed=seed, n_points=6000, noise=0.005)
+    res = houghcad.segment(c.points, families="all", seed=0)
+    truth = np.flatnonzero(c.labels == 0)
+    best = max(res.segments, key=lambda s: np.intersect1d(s.indices, truth).size)
+    assert best.type == "helical_surface"
+    assert best.params["n"] == int(c.primitives[0]["params"]["n"])
+    assert 2 * np.intersect1d(best.indices, truth).size / (len(truth) + len(best.indices)) >= 0.85
+    assert best.mfe <= 0.01

@@ -222,7 +222,7 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
         for v in grid.cell_center(pk):
             prim = fam.primitive(v, pl)
             if prim is not None and fam.valid(prim, ctx):
-                out.append((prim, max(2.0 * ctx.cell, 1.5 * float(grid.width[0]))))
+                out.append((prim, fam.coarse_tolerance(grid, Pl, ctx)))
     return out
 
 

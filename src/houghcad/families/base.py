@@ -114,6 +114,12 @@ class Family:
     def primitive(self, values: np.ndarray, placement: Placement) -> Primitive | None:
         raise NotImplementedError
 
+    def coarse_tolerance(self, grid: Grid, Pl: np.ndarray, ctx) -> float:
+        """Inlier distance (standard units) of a peak's first evaluation: what
+        a cell of the accumulator leaves uncertain. The default reads the first
+        axis of the grid as a length."""
+        return max(2.0 * ctx.cell, 1.5 * float(grid.width[0]))
+
     # --- geometry -----------------------------------------------------------
     def distance(self, prim: Primitive, P: np.ndarray) -> np.ndarray:
         """Euclidean distance of points (n, 3) to the surface, shape (n,)."""

@@ -138,6 +138,13 @@ class GeneralizedCone(Family):
         hi = float(min(s.max() * (1 + B_MAX), np.tan(np.radians(85.0))))
         return vote_grid(self._order(Pl), hi, ctx.cell / max(zt, 1e-6), float(np.median(s)))
 
+    def coarse_tolerance(self, grid, Pl, ctx):
+        # The grid is (n, b, slope): a slope cell moves the surface by its
+        # width times the height of the points above the apex.
+        W, ok = projected(Pl)
+        zt = float(np.median(Pl[ok, 2])) if ok.any() else 1.0
+        return max(2.0 * ctx.cell, 1.5 * float(grid.width[2]) * abs(zt))
+
     def gamma(self, Pl, Nl, grid, ctx):
         # Sweep b over its bins and solve slope = (ρ/z)(1 + b cos nθ) (phase 0 in this frame).
         n = self._order(Pl)

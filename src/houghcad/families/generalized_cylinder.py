@@ -305,6 +305,10 @@ class GeneralizedCylinder(Family):
         hi = min(float(rho.max()) * (1 + B_MAX) + ctx.tau, ctx.max_radius)
         return vote_grid(self._order(Pl), hi, ctx.cell, float(np.median(rho)))
 
+    def coarse_tolerance(self, grid, Pl, ctx):
+        # The grid is (n, b, a): a, the size, is the length axis.
+        return max(2.0 * ctx.cell, 1.5 * float(grid.width[2]))
+
     def gamma(self, Pl, Nl, grid, ctx):
         # Sweep b over its bins and solve a = ρ (1 + b cos nθ) (phase 0 in this frame).
         n = self._order(Pl)
