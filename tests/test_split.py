@@ -233,3 +233,43 @@ def _seed_plane(P):
     c = P.mean(axis=0)
     n = np.linalg.eigh(np.cov((P - c).T))[1][:, 0]
     return Primitive("plane", {"normal": n, "offset": float(n @ c), "point": c})
+
+
+def _plane_segment(ctx, idx):
+    from houghcad.families import REGISTRY
+    from houghcad.families.base import Primitive
+    from houghcad.recognize import Candidate, mean_fitting_error
+
+    fam = REGISTRY["plane"]
+    P = ctx.pre.points[idx]
+    c = P.mean(axis=0)
+    nrm = np.linalg.eigh(np.cov(P.T))[1][:, 0]
+    prim = fam.fit(Primitive("plane", {"normal": nrm, "offset": float(nrm @ c)}), P, ctx.pre.normals[idx])
+    d = fam.distance(prim, P)
+    return Candidate(fam, prim, idx, mean_fitting_error(d, P), {"d": d})
+
+
+def test_noisy_segment_fitted_worse_than_the_noise_goes_to_its_own_surface():
+    from houghcad.families import select
+    from houghcad.split import revisit_poor_fits
+
+    # A plane across a noisy helical strip (as the whole-cloud round leaves one beside a thread).
+    cloud = synth.single("helical_strip", 0, n_points=3000, noise=0.005)
+    ctx = _context(cloud.points)
+    assert ctx.noisy
+    idx = np.flatnonzero(cloud.labels == 0)
+    seg = _plane_segment(ctx, idx)
+    segments = [seg]
+    free = np.ones(len(cloud.points), bool)
+    free[idx] = False
+    revisit_poor_fits(select("all"), ctx, free, segments)
+    assert segments[0].family.name == "helical_strip"
+    assert len(segments[0].indices) >= 0.8 * len(idx)
+    assert not free[segments[0].indices].any()
+    # A plane fitted to the noise stays as it is.
+    cloud = synth.single("plane", 0, n_points=3000, noise=0.005)
+    ctx = _context(cloud.points)
+    seg = _plane_segment(ctx, np.arange(len(cloud.points)))
+    segments = [seg]
+    revisit_poor_fits(select("all"), ctx, np.zeros(len(cloud.points), bool), segments)
+    assert segments[0] is seg

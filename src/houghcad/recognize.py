@@ -359,6 +359,12 @@ def recognize(idx: np.ndarray, families: list[Family], ctx: Context, free: np.nd
     Returns the accepted candidates; their points are still marked free in
     ``free`` (the caller removes them).
     """
+    return select(candidates(idx, families, ctx, free), free, ctx)
+
+
+def candidates(idx: np.ndarray, families: list[Family], ctx: Context, free: np.ndarray) -> list[Candidate]:
+    """Every family's evaluated candidates on the free points of ``idx``
+    (global indices), before selection."""
     idx = idx[free[idx]]
     if len(idx) < ctx.min_points:
         return []
@@ -375,7 +381,7 @@ def recognize(idx: np.ndarray, families: list[Family], ctx: Context, free: np.nd
             continue
         for prim, coarse in propose(fam, idx, ctx):
             cands.extend(evaluate(fam, prim, idx, ctx, coarse))
-    return select(cands, free, ctx)
+    return cands
 
 
 def refine(segments: list[Candidate], families: list[Family], ctx: Context) -> None:

@@ -21,7 +21,7 @@ from sklearn.cluster import DBSCAN
 from .families import Family
 from .families.base import Primitive
 from .preprocess import rotation_to_z
-from .recognize import Candidate, Context, dense_subsets, inliers, mean_fitting_error, recognize, select
+from .recognize import Candidate, Context, candidates, dense_subsets, inliers, mean_fitting_error, recognize, select
 
 
 def owners(segments: list[Candidate], n: int) -> np.ndarray:
@@ -438,8 +438,54 @@ def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments
     # Only noise lets simpler families slice a cone or torus in the
     # whole-cloud round (on clean samples evaluate()'s gate rejects slices).
     per_cluster = [f for f in families if f.simple and not f.global_search] if ctx.noisy else []
+    if ctx.noisy:
+        revisit_poor_fits(families, ctx, free, segments)
     _revote_groups(cplx, per_cluster, ctx, free, segments)
     merge_complex(segments, ctx, free)
+
+
+def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate],
+                      excess: float = 1.3) -> None:
+    """On a noisy cloud, vote every family again on each segment whose
+    primitive fits it clearly worse than the noise, in place.
+
+    Such a segment was mostly taken in a round that saw other surfaces too: a
+    plane across a helical strip, a sphere across a generalised cylinder whose
+    own candidate there also held points of its neighbours. Alone, its
+    surface's family fits it to the noise. Among the candidates that explain
+    the segment (80 % of its points, see :func:`_covered`) and fit those
+    points to within ``excess`` times the noise's mean distance (0.8 σ), the
+    simplest family's best replaces it: its own family refitted, when that
+    suffices.
+    """
+    P = ctx.pre.points
+    ref = 0.8 * ctx.pre.noise
+    lctx = replace(ctx, local=True)
+    for k in sorted(range(len(segments)), key=lambda i: -len(segments[i].indices)):
+        s = segments[k]
+        if len(s.indices) < 3 * ctx.min_points:
+            continue
+        own = float(s.family.distance(s.prim, P[s.indices]).mean())
+        if own <= excess * ref:
+            continue
+        avail = np.zeros(len(P), bool)
+        avail[s.indices] = True
+        best = None
+        for c in candidates(s.indices, families, lctx, avail):
+            if len(c.indices) < 0.8 * len(s.indices):
+                continue
+            got = _covered(c, [s], ctx)
+            if not got or got[0][2].mean() > excess * ref:
+                continue
+            key = (c.family.complexity, float(got[0][2].mean()))
+            if best is None or key < best[0]:
+                best = (key, c, got[0][1])
+        if best is not None:
+            _, c, q = best
+            free[s.indices] = True
+            new = _union(c, [q], P)
+            free[new.indices] = False
+            segments[k] = new
 
 
 def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, free: np.ndarray,
