@@ -452,40 +452,54 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
     Such a segment was mostly taken in a round that saw other surfaces too: a
     plane across a helical strip, a sphere across a generalised cylinder whose
     own candidate there also held points of its neighbours. Alone, its
-    surface's family fits it to the noise. Among the candidates that explain
-    the segment (80 % of its points, see :func:`_covered`) and fit those
-    points to within ``excess`` times the noise's mean distance (0.8 σ), the
-    simplest family's best replaces it: its own family refitted, when that
-    suffices.
+    surface's family fits it to the noise.
+
+    Fits are compared by their cost over all the segment's points, each
+    distance capped at tau (MSAC: a stray point of a neighbouring face costs
+    every candidate the same), less the noise's own mean distance (0.8 σ).
+    Segments within ``excess`` times the noise's cost are left alone. Among
+    the candidates that explain the segment (80 % of its points, see
+    :func:`_covered`), a more complex family displaces a simpler one only by
+    halving that excess, as in selection; the choice replaces the segment
+    when it halves the segment's own excess (its own family refitted, or a
+    simpler one, need only lower it).
     """
     P = ctx.pre.points
     ref = 0.8 * ctx.pre.noise
     lctx = replace(ctx, local=True)
+
+    def cost(c: Candidate, idx: np.ndarray) -> float:
+        return float(np.minimum(c.family.distance(c.prim, P[idx]), ctx.tau).mean()) - ref
+
     for k in sorted(range(len(segments)), key=lambda i: -len(segments[i].indices)):
         s = segments[k]
         if len(s.indices) < 3 * ctx.min_points:
             continue
-        own = float(s.family.distance(s.prim, P[s.indices]).mean())
-        if own <= excess * ref:
+        own = cost(s, s.indices)
+        if own <= (excess - 1.0) * ref:
             continue
         avail = np.zeros(len(P), bool)
         avail[s.indices] = True
-        best = None
+        least = 0.05 * ref  # excesses below this are the noise's own
+        cover = []
         for c in candidates(s.indices, families, lctx, avail):
-            if len(c.indices) < 0.8 * len(s.indices):
-                continue
-            got = _covered(c, [s], ctx)
-            if not got or got[0][2].mean() > excess * ref:
-                continue
-            key = (c.family.complexity, float(got[0][2].mean()))
-            if best is None or key < best[0]:
-                best = (key, c, got[0][1])
-        if best is not None:
-            _, c, q = best
-            free[s.indices] = True
-            new = _union(c, [q], P)
-            free[new.indices] = False
-            segments[k] = new
+            if len(c.indices) >= 0.8 * len(s.indices):
+                got = _covered(c, [s], ctx)
+                if got:
+                    cover.append((max(cost(c, s.indices), least), c, got[0][1]))
+        best = None
+        for e, c, q in sorted(cover, key=lambda t: (t[1].family.complexity, t[0])):
+            if best is None or (e < 0.5 * best[0] if c.family.complexity > best[1].family.complexity else e < best[0]):
+                best = (e, c, q)
+        if best is None:
+            continue
+        e, c, q = best
+        if e >= (0.5 if c.family.complexity > s.family.complexity else 1.0) * own:
+            continue
+        free[s.indices] = True
+        new = _union(c, [q], P)
+        free[new.indices] = False
+        segments[k] = new
 
 
 def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, free: np.ndarray,
