@@ -430,7 +430,9 @@ def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments
     (80 % of each one's points) and fits them no worse than they fit
     themselves. Complex segments, and those of the families voted per
     cluster, then take the adjacent pieces of their surface
-    (:func:`merge_complex`).
+    (:func:`merge_complex`). On noisy clouds every family first votes again
+    on each segment fitted clearly worse than the noise
+    (:func:`revisit_poor_fits`).
     """
     if len(segments) < 2:
         return
