@@ -154,38 +154,30 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
             return []
         prim = new
     ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
-    if not ctx.noisy:
-        # Clean samples lie exactly on their face; a neighbour's tangent band
-        # among the inliers pulls the least squares off it. Refit on the
-        # closer half until the inliers fit to a small fraction of tau, or to
-        # the noise: past it, trimming fits the noise, not the face.
-        for _ in range(4):
-            sel = np.flatnonzero(ok)
+    # Refits on the inliers a face's own points dominate. Clean samples lie
+    # exactly on their face, and a neighbour's tangent band among the inliers
+    # pulls the least squares off it: refit on the closer half until the
+    # inliers fit to a small fraction of tau, or to the noise (past it,
+    # trimming fits the noise, not the face). Noise scatters a face's points
+    # symmetrically about it, 95 % of them within 2 σ, while a neighbouring
+    # face's points within tau (3 σ) sit further out on one side: refit twice
+    # on the inliers within 2 σ, which trims both sides of the face alike.
+    for _ in range(2 if ctx.noisy else 4):
+        sel = np.flatnonzero(ok)
+        if ctx.noisy:
+            sel = sel[d[sel] <= 2.0 * ctx.pre.noise]
+            if len(sel) < 2 * ctx.min_points:
+                break
+        else:
             if len(sel) < 2 * ctx.min_points or d[sel].mean() <= max(0.05 * ctx.tau, ctx.pre.noise):
                 break
             sel = sel[d[sel] <= np.median(d[sel])]
-            sel = sel[_subsample(len(sel), 600, rng)]
-            new = fam.fit(prim, P[sel], N[sel])
-            if new is None or not fam.valid(new, ctx):
-                break
-            prim = new
-            ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
-    else:
-        # Noise scatters a face's points symmetrically about it, 95 % of them
-        # within 2 σ; a neighbouring face's points among the inliers within
-        # tau (3 σ) sit further out on one side and pull the least squares
-        # off. Refitting on the inliers within 2 σ trims both sides of the
-        # face alike and most of the neighbour.
-        for _ in range(2):
-            sel = np.flatnonzero(ok & (d <= 2.0 * ctx.pre.noise))
-            if len(sel) < 2 * ctx.min_points:
-                break
-            sel = sel[_subsample(len(sel), 600, rng)]
-            new = fam.fit(prim, P[sel], N[sel])
-            if new is None or not fam.valid(new, ctx):
-                break
-            prim = new
-            ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
+        sel = sel[_subsample(len(sel), 600, rng)]
+        new = fam.fit(prim, P[sel], N[sel])
+        if new is None or not fam.valid(new, ctx):
+            break
+        prim = new
+        ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
     sel = np.flatnonzero(ok)
     out = []
     for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
