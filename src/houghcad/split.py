@@ -468,6 +468,7 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
     """
     P = ctx.pre.points
     ref = 0.8 * ctx.pre.noise
+    least = 0.05 * ref  # excesses below this are the noise's own
     lctx = replace(ctx, local=True)
 
     def cost(c: Candidate, idx: np.ndarray) -> float:
@@ -482,7 +483,6 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
             continue
         avail = np.zeros(len(P), bool)
         avail[s.indices] = True
-        least = 0.05 * ref  # excesses below this are the noise's own
         cover = []
         for c in candidates(s.indices, families, lctx, avail):
             if len(c.indices) >= 0.8 * len(s.indices):

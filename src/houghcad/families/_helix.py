@@ -80,6 +80,18 @@ def screw_placement(P: np.ndarray, N: np.ndarray, trim: float = 0.0) -> tuple[Pl
     return Placement(rotation_to_z(a), q), float(p), relative_complex_residual(P[sel], res)
 
 
+def gated_screw_placement(P: np.ndarray, N: np.ndarray, ctx) -> tuple[Placement, float] | None:
+    """:func:`screw_placement` behind the helical families' whole-cloud gate:
+    in the global round (``ctx.local`` False) the cloud must be one
+    screw-invariant surface (residual at most :data:`GLOBAL_COMPLEX_RESIDUAL`;
+    on noisy clouds with :data:`NOISY_TRIM` of the lines left out), else None
+    and the per-cluster rounds decide. Returns (placement, pitch)."""
+    pl, p, res = screw_placement(P, N, NOISY_TRIM if not ctx.local and ctx.noisy else 0.0)
+    if not ctx.local and res > GLOBAL_COMPLEX_RESIDUAL:
+        return None
+    return pl, p
+
+
 def relative_complex_residual(P: np.ndarray, res: float) -> float:
     """The residual of :func:`axis_from_normal_lines` on the points P (n, 3),
     relative to their mean squared distance from their centroid: below

@@ -33,6 +33,13 @@ def projected(Pl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return Pl[ok, :2] / z[ok, None], ok
 
 
+def typical_height(Pl: np.ndarray) -> float:
+    """Median height above the apex (standard units) of the local points in
+    front of it (1 when there are none)."""
+    ok = projected(Pl)[1]
+    return float(np.median(Pl[ok, 2])) if ok.any() else 1.0
+
+
 def cone_directrix_frame(P: np.ndarray, N: np.ndarray, iters: int = 4):
     """Apex (3,), frame R (3, 3) (rows: ref_dir, ·, axis) and order n of a generalised cone, or None."""
     apex, cond = planes_intersection(P, N)
@@ -132,18 +139,16 @@ class GeneralizedCone(Family):
         return n
 
     def region(self, Pl, Nl, ctx):
-        W, ok = projected(Pl)
+        W, _ = projected(Pl)
         s = np.hypot(W[:, 0], W[:, 1]) if len(W) else np.ones(1)
-        zt = float(np.median(Pl[ok, 2])) if ok.any() else 1.0
+        zt = typical_height(Pl)
         hi = float(min(s.max() * (1 + B_MAX), np.tan(np.radians(85.0))))
         return vote_grid(self._order(Pl), hi, ctx.cell / max(zt, 1e-6), float(np.median(s)))
 
     def coarse_tolerance(self, grid, Pl, ctx):
         # The grid is (n, b, slope): a slope cell moves the surface by its
         # width times the height of the points above the apex.
-        W, ok = projected(Pl)
-        zt = float(np.median(Pl[ok, 2])) if ok.any() else 1.0
-        return max(2.0 * ctx.cell, 1.5 * float(grid.width[2]) * abs(zt))
+        return max(2.0 * ctx.cell, 1.5 * float(grid.width[2]) * abs(typical_height(Pl)))
 
     def gamma(self, Pl, Nl, grid, ctx):
         # Sweep b over its bins and solve slope = (ρ/z)(1 + b cos nθ) (phase 0 in this frame).

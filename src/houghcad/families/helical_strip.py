@@ -17,7 +17,7 @@ from scipy.optimize import least_squares
 
 from ..hough import Grid
 from .base import Frame, Family, Primitive, axis_from_normal_lines, register, tangent_basis, unit
-from ._helix import GLOBAL_COMPLEX_RESIDUAL, NOISY_TRIM, band_edges, cylindrical, frame_axes, screw_placement
+from ._helix import band_edges, cylindrical, frame_axes, gated_screw_placement
 
 TAU = 2.0 * np.pi
 
@@ -64,10 +64,10 @@ class HelicalStrip(Family):
 
     # --- standard form and voting -------------------------------------------
     def placements(self, P, N, ctx):
-        # The whole-cloud gate on noisy clouds leaves out the worst lines (see NOISY_TRIM).
-        pl, p, res = screw_placement(P, N, NOISY_TRIM if not ctx.local and ctx.noisy else 0.0)
-        if not ctx.local and res > GLOBAL_COMPLEX_RESIDUAL:
+        placed = gated_screw_placement(P, N, ctx)
+        if placed is None:
             return []  # the whole cloud is not screw-invariant: leave it to the per-cluster rounds
+        pl, p = placed
         rho = np.hypot(*pl.local(P, N)[0][:, :2].T)
         if abs(p) < 0.01 * max(float(np.median(rho)), 1e-9):
             return []  # no screw motion: a plane or a surface of revolution

@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 
 from ..hough import Grid
 from .base import Frame, Family, Primitive, axis_from_normal_lines, register, tangent_basis, unit
-from ._helix import GLOBAL_COMPLEX_RESIDUAL, NOISY_TRIM, cylindrical, frame_axes, screw_placement
+from ._helix import cylindrical, frame_axes, gated_screw_placement
 
 TAU = 2.0 * np.pi
 MAX_STARTS = 4
@@ -60,10 +60,10 @@ class HelicalSurface(Family):
 
     # --- standard form and voting -------------------------------------------
     def placements(self, P, N, ctx):
-        # The whole-cloud gate on noisy clouds leaves out the worst lines (see NOISY_TRIM).
-        pl, p, res = screw_placement(P, N, NOISY_TRIM if not ctx.local and ctx.noisy else 0.0)
-        if not ctx.local and res > GLOBAL_COMPLEX_RESIDUAL:
+        placed = gated_screw_placement(P, N, ctx)
+        if placed is None:
             return []  # the whole cloud is not screw-invariant: leave it to the per-cluster rounds
+        pl, p = placed
         Pl = pl.local(P, N)[0]
         rho = np.hypot(Pl[:, 0], Pl[:, 1])
         if abs(p) < 0.005 * max(float(np.median(rho)), 1e-9):
