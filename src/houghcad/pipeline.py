@@ -14,7 +14,8 @@ from .errors import InputError
 from .preprocess import preprocess
 from .recognize import Candidate, Context, mean_fitting_error, recognize, refine
 from .result import GROUP_KINDS, Group, Part, Result, Segment
-from .split import absorb, accept, consolidate, dissolve_redundant, settle_edges, splitting_phase
+from .split import absorb, accept, consolidate, dissolve_redundant, settle_edges, settle_noisy_edges, \
+    splitting_phase
 
 
 class Segmenter:
@@ -130,8 +131,11 @@ class Segmenter:
         absorb(segments, free, ctx)
         delta = max(0.3 * pre.spacing, ctx.tau)
         dissolve_redundant(segments, ctx, delta, ctx.link)
-        # On CAD samples the faces' boundary curves lie on both faces.
-        settle_edges(segments, ctx, delta, ctx.link)
+        if ctx.noisy:
+            settle_noisy_edges(segments, ctx, ctx.link)
+        else:
+            # On CAD samples the faces' boundary curves lie on both faces.
+            settle_edges(segments, ctx, delta, ctx.link)
         # Families that specialise a recognised one (annulus: a plane bounded
         # by two circles) take the segments that have their shape.
         refine(segments, fams, ctx)

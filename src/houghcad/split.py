@@ -249,7 +249,7 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candida
 
 def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
     """Give each leftover point to the segment of its nearest assigned
-    neighbour when it lies within ε of that segment's primitive."""
+    neighbour when it lies within ε (noisy clouds: τ) of that segment's primitive."""
     rest = np.flatnonzero(free)
     if len(rest) == 0 or not segments:
         return
@@ -262,7 +262,9 @@ def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
     for k in np.unique(seg):
         pts = rest[seg == k]
         s = segments[k]
-        pts = pts[s.family.distance(s.prim, P[pts]) < ctx.epsilon]
+        # On a noisy cloud ε is 6 σ: a band that wide beyond a surface is
+        # another surface's (its own points lie within τ = 3 σ).
+        pts = pts[s.family.distance(s.prim, P[pts]) < (ctx.tau if ctx.noisy else ctx.epsilon)]
         if len(pts):
             free[pts] = False
             segments[k] = replace(s, indices=np.union1d(s.indices, pts))
@@ -320,6 +322,59 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
         add = np.flatnonzero(moved & (best == j))
         if len(add) or len(keep) < len(s.indices):
             segments[j] = replace(s, indices=np.union1d(keep, add))
+
+
+def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k: int = 12,
+                       rounds: int = 8) -> None:
+    """Noisy clouds: give each point near a boundary to the adjacent segment
+    whose surface is nearest, in place.
+
+    Scattered points near an edge lie within the inlier distance of both
+    faces; whoever was accepted or grown first took a band up to ε wide of its
+    neighbour's points. The nearest surface (among the point's own segment and
+    the segments of its neighbours within ``reach``, with the estimated normal
+    within the angle tolerance of that surface's) is the likelier face. Each
+    round moves the points next to the current boundary, so the boundary
+    walks to where the surfaces cross; a segment keeps at least min_points.
+    """
+    if len(segments) < 2:
+        return
+    P, N = ctx.pre.points, ctx.pre.normals
+    for _ in range(rounds):
+        owner = owners(segments, len(P))
+        pts = np.flatnonzero(owner >= 0)
+        dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
+        other = np.where(np.isfinite(dist), owner[np.minimum(nb, len(P) - 1)], -1)
+        mask = (other >= 0) & (other != owner[pts][:, None])
+        if not mask.any():
+            return
+        pairs = np.unique(np.stack([other[mask], np.broadcast_to(pts[:, None], other.shape)[mask]], 1), axis=0)
+        edge = np.unique(pairs[:, 1])
+        best = owner.copy()
+        best_d = np.full(len(P), np.inf)
+        for j in np.unique(owner[edge]):
+            e = edge[owner[edge] == j]
+            best_d[e] = segments[j].family.distance(segments[j].prim, P[e])
+        for j in np.unique(pairs[:, 0]):
+            cand = pairs[pairs[:, 0] == j, 1]
+            s = segments[j]
+            d = s.family.distance(s.prim, P[cand])
+            sn = s.family.surface_normals(s.prim, P[cand])
+            ok = (d < best_d[cand]) & (np.abs(np.einsum("ij,ij->i", sn, N[cand])) >= ctx.cos_angle)
+            best[cand[ok]] = j
+            best_d[cand[ok]] = d[ok]
+        moved = best != owner
+        left = np.bincount(owner[~moved & (owner >= 0)], minlength=len(segments))
+        short = moved & (owner >= 0)
+        short[short] = left[owner[short]] < ctx.min_points
+        moved &= ~short
+        if not moved.any():
+            return
+        for j, s in enumerate(segments):
+            keep = s.indices[~moved[s.indices]]
+            add = np.flatnonzero(moved & (best == j))
+            if len(add) or len(keep) < len(s.indices):
+                segments[j] = replace(s, indices=np.union1d(keep, add))
 
 
 def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, reach: float,
