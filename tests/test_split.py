@@ -266,6 +266,27 @@ def test_noisy_segment_fitted_worse_than_the_noise_goes_to_its_own_surface():
     assert segments[0].family.name == "helical_strip"
     assert len(segments[0].indices) >= 0.8 * len(idx)
     assert not free[segments[0].indices].any()
+    # A plane across a noisy dome and a band of the side face it meets (a
+    # quarter of the segment): a curved family takes the dome, and the band
+    # is freed for its neighbours.
+    from scipy.spatial import cKDTree
+
+    part = synth.PARTS["ellipsoid_part"](seed=2, n_points=6000, noise=0.005)
+    ctx = _context(part.points)
+    names = [p["name"] for p in part.primitives]
+    P = ctx.pre.points
+    dome = np.flatnonzero(part.labels == names.index("dome"))
+    side = np.flatnonzero(part.labels == names.index("box +y"))
+    band = side[np.argsort(cKDTree(P[dome]).query(P[side])[0])[: len(dome) // 3]]
+    segments = [_plane_segment(ctx, np.union1d(dome, band))]
+    free = np.ones(len(P), bool)
+    free[segments[0].indices] = False
+    revisit_poor_fits(select("all"), ctx, free, segments)
+    got = segments[0]
+    assert got.family.name in ("sphere", "torus", "ellipsoid", "surface_of_revolution")
+    assert np.isin(dome, got.indices).mean() >= 0.85
+    assert np.isin(band, got.indices).mean() <= 0.05
+    assert free[np.setdiff1d(band, got.indices)].all() and not free[got.indices].any()
     # A plane fitted to the noise stays as it is.
     cloud = synth.single("plane", 0, n_points=3000, noise=0.005)
     ctx = _context(cloud.points)

@@ -501,6 +501,10 @@ def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments
     merge_complex(segments, ctx, free)
 
 
+#: Share of a poorly fitted segment that a candidate must explain to replace it.
+DOMINANT = 0.6
+
+
 def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate],
                       excess: float = 1.3) -> None:
     """On a noisy cloud, vote every family again on each segment whose
@@ -515,11 +519,14 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
     distance capped at tau (MSAC: a stray point of a neighbouring face costs
     every candidate the same), less the noise's own mean distance (0.8 σ).
     Segments within ``excess`` times the noise's cost are left alone. Among
-    the candidates that explain the segment (80 % of its points, see
+    the candidates that explain most of the segment (a share of at least
+    ``DOMINANT`` of its points, 80 % of that share within tau, see
     :func:`_covered`), a more complex family displaces a simpler one only by
     halving that excess, as in selection; the choice replaces the segment
-    when it halves the segment's own excess (its own family refitted, or a
-    simpler one, need only lower it).
+    when, on its share, it halves the excess of the segment's own primitive
+    (its own family refitted, or a simpler one, need only lower it). The
+    rest of the segment, often a band of a neighbouring face that no one
+    primitive explains with it, is freed for its neighbours (:func:`absorb`).
     """
     P = ctx.pre.points
     ref = 0.8 * ctx.pre.noise
@@ -540,10 +547,13 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
         avail[s.indices] = True
         cover = []
         for c in candidates(s.indices, families, lctx, avail):
-            if len(c.indices) >= 0.8 * len(s.indices):
-                got = _covered(c, [s], ctx)
-                if got:
-                    cover.append((max(cost(c, s.indices), least), c, got[0][1]))
+            if len(c.indices) < DOMINANT * len(s.indices):
+                continue
+            # The candidate's share of the segment, compared there.
+            sub = replace(s, indices=c.indices)
+            got = _covered(c, [sub], ctx)
+            if got:
+                cover.append((max(cost(c, s.indices), least), c, got[0][1]))
         best = None
         for e, c, q in sorted(cover, key=lambda t: (t[1].family.complexity, t[0])):
             if best is None or (e < 0.5 * best[0] if c.family.complexity > best[1].family.complexity else e < best[0]):
@@ -551,7 +561,10 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
         if best is None:
             continue
         e, c, q = best
-        if e >= (0.5 if c.family.complexity > s.family.complexity else 1.0) * own:
+        # Against the segment's own primitive on the candidate's share only:
+        # the rest may be another surface, which no one primitive explains.
+        mine, theirs = max(cost(c, c.indices), least), max(cost(s, c.indices), least)
+        if mine >= (0.5 if c.family.complexity > s.family.complexity else 1.0) * theirs:
             continue
         free[s.indices] = True
         new = _union(c, [q], P)
