@@ -1,0 +1,90 @@
+#!/usr/bin/env python
+"""Synthetic mechanical parts benchmark: segmentation of whole parts at several noise levels.
+
+Usage::
+
+    python benchmarks/parts.py [--seeds 3] [--points 12000] [--noise 0,0.002,0.005]
+                               [--families simple] [--jobs 2] [--no-write]
+
+Every part of :data:`houghcad.synth.PARTS` except the complex composites (scored by
+``complex.py``) is generated at each noise level (σ as a fraction of the diagonal; 0 is a sampled
+CAD model) for ``--seeds`` seeds and goes through ``houghcad.segment(points, families=...)``.
+Each run is scored with the Fit4CAD measures (mean DSC over the part's faces); the table gives
+the mean over seeds, each seed's figure, the face with the lowest DSC over the seeds and the
+median time.
+
+The summary goes between the ``<!-- parts:begin/end -->`` markers of BENCHMARKS.md unless
+``--no-write``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+import sys
+import time
+
+import numpy as np
+
+from complex import COMPOSITES  # the scripts run from benchmarks/
+from fit4cad import publish_section
+
+
+def run_part(args):
+    name, seed, n_points, noise, families = args
+    import houghcad
+    from houghcad import synth
+    from houghcad.evaluate import classification_measures
+
+    cloud = synth.PARTS[name](seed=seed, n_points=n_points, noise=noise)
+    t = time.perf_counter()
+    res = houghcad.segment(cloud.points, families=families, seed=0)
+    dt = time.perf_counter() - t
+    m = classification_measures([np.asarray(f) for f in res.faces()], cloud.segments(), len(cloud.points),
+                                per_segment=True)
+    per = np.asarray(m["per_segment"]["DSC"], dtype=float)
+    k = int(np.argmin(per))
+    return dict(part=name, seed=seed, noise=noise, dsc=float(m["DSC"]), seconds=dt,
+                worst=(float(per[k]), cloud.primitives[k]["name"]))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--points", type=int, default=12000)
+    ap.add_argument("--noise", default="0,0.002,0.005", help="comma-separated noise levels (σ / diagonal)")
+    ap.add_argument("--families", default="simple")
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--no-write", action="store_true")
+    a = ap.parse_args(argv)
+    from houghcad import synth
+
+    parts = [p for p in synth.PARTS if p not in COMPOSITES]
+    noise = [float(x) for x in a.noise.split(",") if x.strip()]
+    cases = [(p, s, a.points, nz, a.families) for nz in noise for p in parts for s in range(a.seeds)]
+    rows = []
+    with mp.get_context("spawn").Pool(a.jobs) as pool:
+        for r in pool.imap(run_part, cases):
+            rows.append(r)
+            print(f"{r['part']:<26} noise {r['noise']:<6} seed {r['seed']:<3} DSC {r['dsc']:.3f} "
+                  f"worst {r['worst'][1]} {r['worst'][0]:.2f}  {r['seconds']:.1f} s", file=sys.stderr, flush=True)
+    lines = ["| part | noise σ | mean DSC | per seed | worst face (DSC) | median s |", "|---|---|---|---|---|---|"]
+    for nz in noise:
+        for p in parts:
+            rs = [r for r in rows if r["part"] == p and r["noise"] == nz]
+            w = min(rs, key=lambda r: r["worst"][0])["worst"]
+            lines.append(f"| {p} | {nz:g} | {np.mean([r['dsc'] for r in rs]):.3f} | "
+                         f"{', '.join('%.3f' % r['dsc'] for r in rs)} | {w[1]} ({w[0]:.2f}) | "
+                         f"{np.median([r['seconds'] for r in rs]):.1f} |")
+        rs = [r for r in rows if r["noise"] == nz]
+        lines.append(f"| **all** | {nz:g} | **{np.mean([r['dsc'] for r in rs]):.3f}** | | | "
+                     f"{np.median([r['seconds'] for r in rs]):.1f} |")
+    publish_section("parts", "Synthetic parts", "parts.py", argv, [
+        f"- {a.seeds} seeds per part and noise level, {a.points} points, random pose; "
+        f"`segment(families=\"{a.families}\")`; mean DSC over the part's faces (Fit4CAD measure).",
+    ], lines, not a.no_write)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
