@@ -119,18 +119,27 @@ def run_single(args):
                 found=",".join(types))
 
 
-def run_part(args):
-    name, seed, n_points, noise = args
+def segment_part(name: str, seed: int, n_points: int, noise: float, families):
+    """Generate ``synth.PARTS[name]`` and segment it: (cloud, result, seconds, the Fit4CAD
+    measures over its faces, per face too)."""
     import houghcad
     from houghcad import synth
     from houghcad.evaluate import classification_measures
-    from houghcad.families import REGISTRY
 
     cloud = synth.PARTS[name](seed=seed, n_points=n_points, noise=noise)
     t = time.perf_counter()
-    res = houghcad.segment(cloud.points, families="all", seed=0)
+    res = houghcad.segment(cloud.points, families=families, seed=0)
     dt = time.perf_counter() - t
-    m = classification_measures([np.asarray(f) for f in res.faces()], cloud.segments(), len(cloud.points))
+    m = classification_measures([np.asarray(f) for f in res.faces()], cloud.segments(), len(cloud.points),
+                                per_segment=True)
+    return cloud, res, dt, m
+
+
+def run_part(args):
+    name, seed, n_points, noise = args
+    from houghcad.families import REGISTRY
+
+    cloud, res, dt, m = segment_part(name, seed, n_points, noise, "all")
     cplx = [s for s in res.segments if s.type in REGISTRY and not REGISTRY[s.type].simple]
     worst = max(cplx, key=lambda s: s.mfe) if cplx else None
     # MFE is relative to the segment's own bounding-box diagonal, while the noise is relative to the

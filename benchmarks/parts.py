@@ -22,26 +22,16 @@ from __future__ import annotations
 import argparse
 import multiprocessing as mp
 import sys
-import time
 
 import numpy as np
 
-from complex import COMPOSITES  # the scripts run from benchmarks/
+from complex import COMPOSITES, segment_part  # the scripts run from benchmarks/
 from fit4cad import publish_section
 
 
 def run_part(args):
     name, seed, n_points, noise, families = args
-    import houghcad
-    from houghcad import synth
-    from houghcad.evaluate import classification_measures
-
-    cloud = synth.PARTS[name](seed=seed, n_points=n_points, noise=noise)
-    t = time.perf_counter()
-    res = houghcad.segment(cloud.points, families=families, seed=0)
-    dt = time.perf_counter() - t
-    m = classification_measures([np.asarray(f) for f in res.faces()], cloud.segments(), len(cloud.points),
-                                per_segment=True)
+    cloud, _, dt, m = segment_part(name, seed, n_points, noise, families)
     per = np.asarray(m["per_segment"]["DSC"], dtype=float)
     k = int(np.argmin(per))
     return dict(part=name, seed=seed, noise=noise, dsc=float(m["DSC"]), seconds=dt,

@@ -270,6 +270,37 @@ def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
             segments[k] = replace(s, indices=np.union1d(s.indices, pts))
 
 
+def _neighbour_owners(owner: np.ndarray, pts: np.ndarray, ctx: Context, reach: float,
+                      k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k nearest neighbours (m, k) of the points ``pts`` within ``reach``
+    (missing ones as index 0) and their segments in ``owner`` (-1: none)."""
+    P = ctx.pre.points
+    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
+    ok = np.isfinite(dist)
+    nb = np.where(ok, nb, 0)
+    return nb, np.where(ok, owner[nb], -1)
+
+
+def _reassign(segments: list[Candidate], owner: np.ndarray, best: np.ndarray, min_points: int) -> bool:
+    """Move, in place, each point from segment ``owner`` to segment ``best``
+    (both (n,), -1: none), except that a segment keeps at least min_points of
+    its own. Returns whether any point moved."""
+    moved = best != owner
+    left = np.bincount(owner[(owner >= 0) & ~moved], minlength=len(segments))
+    short = moved & (owner >= 0)
+    short[short] = left[owner[short]] < min_points
+    best = np.where(short, owner, best)
+    moved &= ~short
+    if not moved.any():
+        return False
+    for j, s in enumerate(segments):
+        keep = s.indices[best[s.indices] == j]
+        add = np.flatnonzero(moved & (best == j))
+        if len(add) or len(keep) < len(s.indices):
+            segments[j] = replace(s, indices=np.union1d(keep, add))
+    return True
+
+
 def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: float, k: int = 12) -> None:
     """Give the points that lie on two adjacent segments' surfaces to the smaller one,
     and unsegmented points that lie on an adjacent segment's surface to it.
@@ -288,10 +319,7 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
     best = owner.copy()
     best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
     pts = np.arange(len(P))
-    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
-    ok = np.isfinite(dist)
-    nb = np.where(ok, nb, 0)
-    other = np.where(ok, owner[nb], -1)
+    _, other = _neighbour_owners(owner, pts, ctx, reach, k)
     # Pairs (point, adjacent smaller segment), each once; unsegmented points
     # count as owned by an infinitely large segment.
     mask = (other >= 0) & (other != owner[pts][:, None])
@@ -308,20 +336,7 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
         cand = cand[sizes[j] < best_size[cand]]
         best[cand] = j
         best_size[cand] = sizes[j]
-    moved = best != owner
-    # A segment keeps at least min_points of its own.
-    left = np.bincount(owner[(owner >= 0) & ~moved], minlength=len(segments))
-    short = moved & (owner >= 0)
-    short[short] = left[owner[short]] < ctx.min_points
-    best[short] = owner[short]
-    moved = best != owner
-    if not moved.any():
-        return
-    for j, s in enumerate(segments):
-        keep = s.indices[best[s.indices] == j]
-        add = np.flatnonzero(moved & (best == j))
-        if len(add) or len(keep) < len(s.indices):
-            segments[j] = replace(s, indices=np.union1d(keep, add))
+    _reassign(segments, owner, best, ctx.min_points)
 
 
 def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k: int = 12,
@@ -343,8 +358,7 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
     for _ in range(rounds):
         owner = owners(segments, len(P))
         pts = np.flatnonzero(owner >= 0)
-        dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
-        other = np.where(np.isfinite(dist), owner[np.minimum(nb, len(P) - 1)], -1)
+        _, other = _neighbour_owners(owner, pts, ctx, reach, k)
         mask = (other >= 0) & (other != owner[pts][:, None])
         if not mask.any():
             return
@@ -363,18 +377,8 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
             ok = (d < best_d[cand]) & (np.abs(np.einsum("ij,ij->i", sn, N[cand])) >= ctx.cos_angle)
             best[cand[ok]] = j
             best_d[cand[ok]] = d[ok]
-        moved = best != owner
-        left = np.bincount(owner[~moved & (owner >= 0)], minlength=len(segments))
-        short = moved & (owner >= 0)
-        short[short] = left[owner[short]] < ctx.min_points
-        moved &= ~short
-        if not moved.any():
+        if not _reassign(segments, owner, best, ctx.min_points):
             return
-        for j, s in enumerate(segments):
-            keep = s.indices[~moved[s.indices]]
-            add = np.flatnonzero(moved & (best == j))
-            if len(add) or len(keep) < len(s.indices):
-                segments[j] = replace(s, indices=np.union1d(keep, add))
 
 
 def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, reach: float,
@@ -445,10 +449,7 @@ def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth
     for s in segments:
         sn[s.indices] = s.family.surface_normals(s.prim, P[s.indices])
     pts = np.flatnonzero(owner >= 0)
-    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=ctx.link)
-    ok = np.isfinite(dist)
-    nb = np.where(ok, nb, 0)
-    other = np.where(ok, owner[nb], -1)
+    nb, other = _neighbour_owners(owner, pts, ctx, ctx.link, k)
     mine = owner[pts][:, None]
     cos = np.abs(np.einsum("ij,ikj->ik", sn[pts], sn[nb]))
     mask = (other >= 0) & (other != mine)
