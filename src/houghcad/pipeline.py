@@ -14,8 +14,8 @@ from .errors import InputError
 from .preprocess import preprocess
 from .recognize import Candidate, Context, mean_fitting_error, recognize, refine
 from .result import GROUP_KINDS, Group, Part, Result, Segment
-from .split import absorb, accept, consolidate, dissolve_redundant, settle_edges, settle_noisy_edges, \
-    splitting_phase
+from .split import absorb, accept, consolidate, dissolve_redundant, revisit_poor_fits, settle_edges, \
+    settle_noisy_edges, splitting_phase
 
 
 class Segmenter:
@@ -133,6 +133,12 @@ class Segmenter:
         dissolve_redundant(segments, ctx, delta, ctx.link)
         if ctx.noisy:
             settle_noisy_edges(segments, ctx, ctx.link)
+            # Settled edges give each segment its whole face: one whose
+            # surface the earlier rounds misread (a generalised cylinder on a
+            # band of a cone) now fits it clearly worse than the noise.
+            if revisit_poor_fits(voted, ctx, free, segments):
+                absorb(segments, free, ctx)
+                settle_noisy_edges(segments, ctx, ctx.link)
         else:
             # On CAD samples the faces' boundary curves lie on both faces.
             settle_edges(segments, ctx, delta, ctx.link)

@@ -23,6 +23,8 @@ from .preprocess import Preprocessed
 
 #: Peaks evaluated per placement for a complex (non-simple) family.
 COMPLEX_MAX_PEAKS = 6
+#: Peaks a stacked family adds from the votes off its top peak's surface (see :func:`_beside_top`).
+BESIDE_TOP_PEAKS = 2
 
 
 @dataclass
@@ -227,11 +229,47 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
         cap = ctx.max_peaks if fam.simple else min(ctx.max_peaks, COMPLEX_MAX_PEAKS)
         pk, _ = persistent_peaks(H, ctx.persistence, grid.wrap, max_peaks=cap)
         pk = pk[H.ravel()[pk] >= ctx.min_votes]
+        if fam.stacked and not ctx.local and len(pk):
+            # A surface that shares its placement with a larger one (two
+            # generalised cylinders on one directrix and axis) votes a lower
+            # peak, and the cones or bands between them fill the valley: its
+            # persistence falls under the threshold relative to the top. Its
+            # own votes, without the top's points, confirm it.
+            more = _beside_top(fam, pl, grid, H, pk, P, Pl, voter, vals, ctx)
+            pk = np.concatenate([pk, more[:BESIDE_TOP_PEAKS]])
         for v in grid.cell_center(pk):
             prim = fam.primitive(v, pl)
             if prim is not None and fam.valid(prim, ctx):
                 out.append((prim, fam.coarse_tolerance(grid, Pl, ctx)))
     return out
+
+
+def _beside_top(fam: Family, pl, grid, H: np.ndarray, pk: np.ndarray, P: np.ndarray, Pl: np.ndarray,
+                voter: np.ndarray, vals: np.ndarray, ctx: Context) -> np.ndarray:
+    """Flat indices (k,) of the local maxima of the accumulator ``H`` whose
+    persistence misses the threshold by at most half, and that stay peaks
+    above the threshold (against H's top) when the points (P (n, 3), Pl the
+    same in the placement's frame) within the coarse tolerance of the top
+    peak's surface withdraw their votes (``voter`` (m,), ``vals`` (m, d)).
+    ``pk``: the peaks kept already, the top one first."""
+    none = np.zeros(0, np.int64)
+    top = float(H.max())
+    near, _ = persistent_peaks(H, 0.5 * ctx.persistence, grid.wrap)
+    near = near[~np.isin(near, pk)]
+    if not len(near):
+        return none
+    prim = fam.primitive(grid.cell_center(pk[:1])[0], pl)
+    if prim is None or not fam.valid(prim, ctx):
+        return none
+    off = fam.distance(prim, P) > fam.coarse_tolerance(grid, Pl, ctx)
+    if off.sum() < ctx.min_points:
+        return none
+    keep = off[voter]
+    H2 = smooth(accumulate(grid, voter[keep], vals[keep]), grid.wrap)
+    if H2.max() < ctx.persistence * top:
+        return none
+    again, _ = persistent_peaks(H2, ctx.persistence * top / H2.max(), grid.wrap)
+    return again[np.isin(again, near) & (H2.ravel()[again] >= ctx.min_votes)]
 
 
 def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:

@@ -507,7 +507,7 @@ DOMINANT = 0.6
 
 
 def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate],
-                      excess: float = 1.3) -> None:
+                      excess: float = 1.3) -> bool:
     """On a noisy cloud, vote every family again on each segment whose
     primitive fits it clearly worse than the noise, in place.
 
@@ -528,6 +528,7 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
     (its own family refitted, or a simpler one, need only lower it). The
     rest of the segment, often a band of a neighbouring face that no one
     primitive explains with it, is freed for its neighbours (:func:`absorb`).
+    Returns whether a segment was replaced.
     """
     P = ctx.pre.points
     ref = 0.8 * ctx.pre.noise
@@ -536,6 +537,8 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
 
     def cost(c: Candidate, idx: np.ndarray) -> float:
         return float(np.minimum(c.family.distance(c.prim, P[idx]), ctx.tau).mean()) - ref
+
+    replaced = False
 
     for k in sorted(range(len(segments)), key=lambda i: -len(segments[i].indices)):
         s = segments[k]
@@ -571,6 +574,8 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
         new = _union(c, [q], P)
         free[new.indices] = False
         segments[k] = new
+        replaced = True
+    return replaced
 
 
 def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, free: np.ndarray,

@@ -93,6 +93,10 @@ class Family:
     simple: ClassVar[bool] = True
     #: Whether it is sought on the whole cloud in the first round.
     global_search: ClassVar[bool] = True
+    #: Whether surfaces of the family often share one placement at several
+    #: sizes (the sections of a stepped shaft on one axis and directrix):
+    #: the whole-cloud vote then also seeks peaks beside the top one.
+    stacked: ClassVar[bool] = False
     #: Name of the family this one specialises (same surface, plus a boundary
     #: shape: an annulus is a plane bounded by two circles). The two explain
     #: the points equally well and ties go to the simpler one, so when both

@@ -40,6 +40,57 @@ def typical_height(Pl: np.ndarray) -> float:
     return float(np.median(Pl[ok, 2])) if ok.any() else 1.0
 
 
+#: Angle (degrees) within which a point's tangent plane passes through an apex (consensus).
+APEX_ANGLE = 5.0
+
+
+def apex_support(x: np.ndarray, P: np.ndarray, N: np.ndarray) -> np.ndarray:
+    """Mask (n,) of the points whose tangent planes pass through the apex x
+    (3,), within ``APEX_ANGLE`` of the ray to it."""
+    return np.abs(np.einsum("ij,ij->i", N, unit(x - P))) < np.sin(np.radians(APEX_ANGLE))
+
+
+def consensus_apexes(P: np.ndarray, N: np.ndarray, rng: np.random.Generator, count: int = 2, trials: int = 300,
+                     max_points: int = 1000, min_points: int = 10) -> list[np.ndarray]:
+    """Point sets (masks (n,)) whose tangent planes pass through one apex,
+    the best supported first, at most ``count``.
+
+    The least-squares point of all tangent planes is pulled off by every
+    other surface in the set (a generalised cylinder on the same directrix
+    beside the cone). The apex of three tangent planes that the most others
+    pass through (:func:`apex_support`) is not: RANSAC over angles, not
+    distances, since a normal's error moves its plane in proportion to the
+    distance from the apex. Each further apex is sought among the points the
+    previous ones left.
+    """
+    tol = np.sin(np.radians(APEX_ANGLE))
+    left = np.ones(len(P), bool)
+    out = []
+    for _ in range(count):
+        idx = np.flatnonzero(left)
+        if len(idx) < max(min_points, 10):
+            break
+        sub = idx[np.sort(rng.choice(len(idx), min(len(idx), max_points), replace=False))]
+        Ps, Ns = P[sub], N[sub]
+        t = rng.integers(0, len(sub), size=(trials, 3))
+        A = Ns[t]
+        good = np.abs(np.linalg.det(A)) > 0.05
+        if not good.any():
+            break
+        A, t = A[good], t[good]
+        X = np.linalg.solve(A, np.einsum("tij,tij->ti", A, Ps[t])[..., None])[..., 0]
+        # (trials, points) at once: 300 x 1000 rays.
+        U = X[:, None, :] - Ps[None, :, :]
+        U /= np.maximum(np.linalg.norm(U, axis=2, keepdims=True), 1e-300)
+        score = (np.abs(np.einsum("tij,ij->ti", U, Ns)) < tol).sum(axis=1)
+        ok = left & apex_support(X[int(np.argmax(score))], P, N)
+        if ok.sum() < max(min_points, 10):
+            break
+        out.append(ok)
+        left &= ~ok
+    return out
+
+
 def cone_directrix_frame(P: np.ndarray, N: np.ndarray, iters: int = 4):
     """Apex (3,), frame R (3, 3) (rows: ref_dir, ·, axis) and order n of a generalised cone, or None."""
     apex, cond = planes_intersection(P, N)
@@ -71,6 +122,11 @@ def cone_directrix_frame(P: np.ndarray, N: np.ndarray, iters: int = 4):
         return None
     phi = float(np.arctan2(p[2], p[1]) / n)
     return apex, phase_frame(R, phi), int(n)
+
+
+def _same_frame(fr, pl: DirectrixPlacement, tol: float = 1e-3) -> bool:
+    return (fr[2] == pl.info["n"] and np.linalg.norm(fr[0] - pl.origin) < tol
+            and fr[1][2] @ pl.R[2] > np.cos(np.radians(1.0)))
 
 
 def _rulings(u: np.ndarray, s: float, b: float, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -124,11 +180,23 @@ class GeneralizedCone(Family):
 
     # --- standard form -------------------------------------------------------------------
     def placements(self, P, N, ctx):
+        out = []
         fr = cone_directrix_frame(P, N)
-        if fr is None:
-            return []
-        apex, R, n = fr
-        return [DirectrixPlacement(R, apex, {"n": n})]
+        if fr is not None:
+            out.append(DirectrixPlacement(fr[1], fr[0], {"n": fr[2]}))
+        if not ctx.local:
+            # On a whole part the best supported apex is often a far one of
+            # a cylinder-like surface, and its candidates span several faces.
+            return out
+        ls = 0 if fr is None else int(apex_support(fr[0], P, N).sum())
+        for ok in consensus_apexes(P, N, np.random.default_rng(ctx.seed), min_points=ctx.min_points):
+            # The least-squares apex stands when nearly as well supported.
+            if ok.all() or ok.sum() <= 1.1 * ls:
+                continue
+            fr = cone_directrix_frame(P[ok], N[ok])
+            if fr is not None and not any(_same_frame(fr, o) for o in out):
+                out.append(DirectrixPlacement(fr[1], fr[0], {"n": fr[2]}))
+        return out
 
     def _order(self, Pl):
         n = active_order()

@@ -174,6 +174,18 @@ def best_order(Q: np.ndarray, c0: np.ndarray, trim: bool = True):
     return best
 
 
+def rulings_angle(ctx) -> float:
+    """Largest angle (radians) between a normal and the plane across the
+    axis for a point to count as on the generalised cylinder.
+
+    The normals' tolerance widens with noise (up to 45°); a cone beside the
+    cylinder on the same axis (half-angle often 30–40°) would then place and
+    vote as cross-sections of every size. A noisy normal's own error stays
+    well under 25°.
+    """
+    return min(ctx.angle, np.radians(25.0))
+
+
 def polar_local(Pl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Polar angle and radius (n,) of local points about the z-axis."""
     return np.arctan2(Pl[:, 1], Pl[:, 0]), np.hypot(Pl[:, 0], Pl[:, 1])
@@ -263,6 +275,7 @@ class GeneralizedCylinder(Family):
     complexity = 6
     simple = False
     global_search = True
+    stacked = True
 
     # --- standard form -------------------------------------------------------------------
     def placements(self, P, N, ctx):
@@ -274,7 +287,7 @@ class GeneralizedCylinder(Family):
             if any(abs(ax @ o.R[2]) > np.cos(np.radians(3.0)) for o in out):
                 continue
             R = rotation_to_z(ax)
-            ok = np.abs(N @ ax) <= np.sin(ctx.angle)
+            ok = np.abs(N @ ax) <= np.sin(rulings_angle(ctx))
             if ok.sum() < max(ctx.min_points, 10):
                 continue
             Q = (P[ok] @ R.T)[:, :2]
@@ -313,7 +326,7 @@ class GeneralizedCylinder(Family):
         # Sweep b over its bins and solve a = ρ (1 + b cos nθ) (phase 0 in this frame).
         n = self._order(Pl)
         th, rho = polar_local(Pl)
-        idx = np.flatnonzero(np.abs(Nl[:, 2]) <= np.sin(ctx.angle))
+        idx = np.flatnonzero(np.abs(Nl[:, 2]) <= np.sin(rulings_angle(ctx)))
         b = grid.centers(1)
         A = rho[idx, None] * (1.0 + b[None, :] * np.cos(n * th[idx])[:, None])
         voter = np.repeat(idx, len(b))
