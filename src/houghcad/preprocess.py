@@ -127,7 +127,7 @@ def quadric_residuals(points: np.ndarray, neighbors: np.ndarray, chunk: int = 16
 
 
 def voting_normals(points: np.ndarray, neighbors: np.ndarray, n_triples: int = 24, angle: float = 10.0,
-                   seed: int = 0, chunk: int = 8192) -> np.ndarray:
+                   seed: int = 0, chunk: int = 8192, anchored: bool = False) -> np.ndarray:
     """Robust unoriented normals by voting (after Raffo et al. 2022).
 
     Every point draws ``n_triples`` random triples of its neighbours; each
@@ -135,14 +135,21 @@ def voting_normals(points: np.ndarray, neighbors: np.ndarray, n_triples: int = 2
     that agree (within ``angle`` degrees) with the most supported one. Near
     sharp edges this picks one side's plane instead of averaging both.
 
+    ``anchored``: every triple is the point itself and two of its
+    neighbours. The most supported side is then a plane through the point:
+    on a face two or three spacings wide between two wide ones, the point's
+    own face, where free triples pick the wide neighbour's plane.
+
     Parameters
     ----------
     points : ndarray, shape (n, 3)
-    neighbors : ndarray of int, shape (n, k)
+    neighbors : ndarray of int, shape (m, k)
+        Neighbours of the m points to estimate; with ``anchored``, column 0
+        is the point itself (as a KD-tree query of the points returns it).
 
     Returns
     -------
-    normals : ndarray, shape (n, 3), unit
+    normals : ndarray, shape (m, 3), unit
     """
     rng = np.random.default_rng(seed)
     n, k = neighbors.shape
@@ -152,6 +159,9 @@ def voting_normals(points: np.ndarray, neighbors: np.ndarray, n_triples: int = 2
         nbr = neighbors[s:s + chunk]
         m = len(nbr)
         pick = rng.integers(0, k, size=(m, n_triples, 3))
+        if anchored:
+            pick[:, :, 0] = 0
+            pick[:, :, 1:] = rng.integers(1, k, size=(m, n_triples, 2))
         tri = points[np.take_along_axis(nbr[:, None, :], pick.reshape(m, -1)[:, None, :], axis=2)[:, 0]]
         tri = tri.reshape(m, n_triples, 3, 3)
         nrm = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
@@ -167,6 +177,11 @@ def voting_normals(points: np.ndarray, neighbors: np.ndarray, n_triples: int = 2
         lv = np.linalg.norm(v, axis=1)
         out[s:s + m] = v / np.where(lv > 0, lv, 1)[:, None]
     return out
+
+
+#: Quadric residual (spacings) above which a clean cloud's point is on a
+#: crease and takes voted normals (``preprocess``, method ``auto``).
+CREASE = 0.1
 
 
 @dataclass
@@ -221,7 +236,9 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         Given normals (used as they are when ``method`` is ``"auto"`` or ``"input"``).
     method : {"auto", "pca", "voting", "input"}
         Normal estimation. ``auto`` uses the given normals if any, else PCA on
-        clean clouds and the voting estimate when the cloud is noisy.
+        clean clouds (points on creases, where no local quadric fits, voted
+        by planes through the point: :func:`voting_normals` ``anchored``) and
+        PCA on 64 neighbours when the cloud is noisy. ``pca``: PCA only.
     k : int
         Neighbourhood size.
     seed : int
@@ -238,6 +255,7 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     dist, nbr = tree.query(x, k=k)
     nrm, ev = pca_normals(x, nbr)
     noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
+    qres = None
     if k > 8:
         # Thin walls and tight curvature inflate the 16-neighbour residual of
         # clean CAD samples (both faces of a plate in one neighbourhood); the
@@ -250,7 +268,8 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         # clean samples; a local quadric's residual is free of it and, on
         # noise, 1.11-1.17 times smaller than the plane's (synthetic planes,
         # cylinders, spheres, tori at 0.1-1% noise).
-        noise = min(noise, 1.15 * float(np.median(quadric_residuals(x, nbr))))
+        qres = quadric_residuals(x, nbr)
+        noise = min(noise, 1.15 * float(np.median(qres)))
     spacing = float(np.median(dist[:, 1]))
     if k > 4:
         # A plate one or two spacings thick, or a sparse random sampling of
@@ -291,6 +310,14 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         if method == "voting":
             nrm = voting_normals(x, nbr, seed=seed)
             used = "voting"
+        elif method == "auto" and used == "pca" and qres is not None:
+            # Clean cloud: PCA averages the two sides of a crease, and on a
+            # face two or three spacings wide (a groove wall, a chamfer) its
+            # neighbourhoods are mostly the neighbours' points. No local
+            # quadric explains a crease, while curvature alone it does.
+            crease = np.flatnonzero(qres > CREASE * spacing)
+            if len(crease):
+                nrm[crease] = voting_normals(x, nbr[crease], seed=seed, anchored=True)
     spacing = float(np.median(dist[:, 1]))
     reach = float(np.median(dist[:, min(6, dist.shape[1] - 1)]))
 
