@@ -196,6 +196,75 @@ def test_voting_normals_at_a_sharp_edge_pick_one_side(seed):
     assert (pca <= 5.0).mean() <= 0.1
 
 
+def _chamfer(seed: int, rows: float = 2.5, h: float = 0.01):
+    """Two wide faces at a right angle joined by a 45° chamfer ``rows`` spacings
+    wide: jittered grids of spacing ``h`` in a random pose. Returns the points,
+    the chamfer's mask and its normal (world)."""
+    rng = np.random.default_rng(seed)
+    w = rows * h
+    a = w / np.sqrt(2.0)
+    y = np.arange(0.0, 0.6, h)
+
+    def strip(u0, u1, f):  # grid over u (profile) x y, mapped to (x, z) by f
+        u = np.arange(u0, u1, h)
+        U, Y = np.meshgrid(u, y, indexing="ij")
+        U = U + rng.uniform(-0.2, 0.2, U.shape) * h
+        x, z = f(U.ravel())
+        return np.column_stack([x, Y.ravel() + rng.uniform(-0.2, 0.2, U.size) * h, z])
+
+    top = strip(-0.4, 0.0, lambda u: (u, np.zeros_like(u)))
+    cham = strip(h / 2, w, lambda t: (t / np.sqrt(2.0), -t / np.sqrt(2.0)))
+    side = strip(h, 0.4, lambda t: (np.full_like(t, a), -a - t))
+    P = np.vstack([top, cham, side])
+    mask = np.r_[np.zeros(len(top), bool), np.ones(len(cham), bool), np.zeros(len(side), bool)]
+    R, t, s = synth.random_pose(rng)
+    n = np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)
+    return s * P @ R.T + t, mask, R @ n
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_anchored_voting_keeps_a_narrow_face_own_plane(seed):
+    # Two or three rows of chamfer between two wide faces: free triples mostly
+    # span a wide face and vote its plane; triples through the point itself
+    # agree only on the chamfer's.
+    P, cham, n = _chamfer(seed)
+    _, nbr = cKDTree(P).query(P, k=16)
+    err = {a: _angles_deg(voting_normals(P, nbr[cham], seed=seed, anchored=a), np.broadcast_to(n, (cham.sum(), 3)))
+           for a in (True, False)}
+    # Two rows: half the points or more get the chamfer's plane exactly (the
+    # others, at its edges, a wide face's), free triples a wide face's.
+    assert np.median(err[True]) <= 1.0 and (err[True] <= 10.0).mean() >= 0.5
+    assert np.median(err[False]) >= 10.0
+    # Three rows: nearly all of them.
+    P, cham, n = _chamfer(seed, rows=3.5)
+    _, nbr = cKDTree(P).query(P, k=16)
+    e3 = _angles_deg(voting_normals(P, nbr[cham], seed=seed, anchored=True), np.broadcast_to(n, (cham.sum(), 3)))
+    assert (e3 <= 10.0).mean() >= 0.9
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_auto_normals_on_a_clean_groove_wall(seed):
+    # The shaft's groove walls are annuli a few spacings wide between two
+    # cylinders: PCA averages them with their neighbours, the crease points'
+    # voted normals keep them.
+    cloud = synth.shaft_with_groove(seed=seed, n_points=12000)
+    walls = np.isin(cloud.labels, [k for k, p in enumerate(cloud.primitives) if p["name"].startswith("groove wall")])
+    auto, pca = preprocess(cloud.points, seed=0), preprocess(cloud.points, method="pca", seed=0)
+    assert auto.normals_method == "pca"
+    e_auto, e_pca = _normal_errors(cloud, auto)[walls], _normal_errors(cloud, pca)[walls]
+    assert np.percentile(e_auto, 75) <= 6.0
+    assert np.median(e_pca) >= 15.0
+
+
+@pytest.mark.parametrize("family,seed", [("cylinder", 0), ("sphere", 1), ("torus", 2), ("cone", 0)])
+def test_auto_normals_are_pca_on_a_clean_smooth_surface(family, seed):
+    # A local quadric explains curvature (measured: no point of these faces is
+    # taken for a crease, even along the patch's boundary).
+    cloud = synth.single(family, seed, n_points=4000)
+    auto, pca = preprocess(cloud.points, seed=0), preprocess(cloud.points, method="pca", seed=0)
+    assert np.all(auto.normals == pca.normals, axis=1).mean() >= 0.99
+
+
 @pytest.mark.parametrize("family,seed", [("plane", 0), ("cylinder", 1), ("sphere", 2), ("torus", 0)])
 def test_auto_widens_the_neighbourhood_on_a_noisy_cloud(family, seed):
     # On noisy clouds `auto` keeps PCA but with 64 neighbours: measured better

@@ -95,8 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: from the point spacing and the estimated noise)")
     p.add_argument("--seed", type=_seed, default=0, metavar="N", help="random seed (default: 0)")
     p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
-                   help="normals: 'auto' uses the file's normals if any, else PCA (with 64 neighbours on noisy "
-                   "clouds); 'pca' and 'voting' always estimate them (default: auto)")
+                   help="normals: 'auto' uses the file's normals if any, else PCA (creases voted on clean clouds, "
+                   "64 neighbours on noisy ones); 'pca' and 'voting' always estimate them (default: auto)")
     p.add_argument("--fit4cad", metavar="DIR",
                    help="also write DIR/<input stem>_primitives.txt in the Fit4CAD ground-truth format")
     p.add_argument("--ply", metavar="OUT.ply",
