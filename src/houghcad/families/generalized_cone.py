@@ -45,9 +45,11 @@ APEX_ANGLE = 5.0
 
 
 def apex_support(x: np.ndarray, P: np.ndarray, N: np.ndarray) -> np.ndarray:
-    """Mask (n,) of the points whose tangent planes pass through the apex x
-    (3,), within ``APEX_ANGLE`` of the ray to it."""
-    return np.abs(np.einsum("ij,ij->i", N, unit(x - P))) < np.sin(np.radians(APEX_ANGLE))
+    """Mask (n,) of the points (P, N (n, 3)) whose tangent planes pass through
+    the apex x (3,), within ``APEX_ANGLE`` of the ray to it; for apexes x
+    (t, 3), one row per apex (t, n)."""
+    U = unit(np.asarray(x, float)[..., None, :] - P)
+    return np.abs(np.einsum("...ij,ij->...i", U, N)) < np.sin(np.radians(APEX_ANGLE))
 
 
 def consensus_apexes(P: np.ndarray, N: np.ndarray, rng: np.random.Generator, count: int = 2, trials: int = 300,
@@ -63,7 +65,6 @@ def consensus_apexes(P: np.ndarray, N: np.ndarray, rng: np.random.Generator, cou
     distance from the apex. Each further apex is sought among the points the
     previous ones left.
     """
-    tol = np.sin(np.radians(APEX_ANGLE))
     left = np.ones(len(P), bool)
     out = []
     for _ in range(count):
@@ -80,9 +81,7 @@ def consensus_apexes(P: np.ndarray, N: np.ndarray, rng: np.random.Generator, cou
         A, t = A[good], t[good]
         X = np.linalg.solve(A, np.einsum("tij,tij->ti", A, Ps[t])[..., None])[..., 0]
         # (trials, points) at once: 300 x 1000 rays.
-        U = X[:, None, :] - Ps[None, :, :]
-        U /= np.maximum(np.linalg.norm(U, axis=2, keepdims=True), 1e-300)
-        score = (np.abs(np.einsum("tij,ij->ti", U, Ns)) < tol).sum(axis=1)
+        score = apex_support(X, Ps, Ns).sum(axis=1)
         ok = left & apex_support(X[int(np.argmax(score))], P, N)
         if ok.sum() < max(min_points, 10):
             break
