@@ -23,6 +23,7 @@ import argparse
 import csv
 import datetime as _dt
 import importlib
+import importlib.metadata
 import io
 import math
 import multiprocessing as mp
@@ -350,7 +351,15 @@ def _machine() -> str:
     except OSError:
         pass
     py = f"Python {platform.python_version()} ({platform.system()} {platform.machine()})"
-    return f"nproc {nproc}{cpu}, {py}"
+    # Results move with the numerical libraries (tie-breaks in KD-tree queries and
+    # clustering), so the versions are part of the record.
+    libs = []
+    for mod in ("numpy", "scipy", "scikit-learn", "numba"):
+        try:
+            libs.append(f"{mod} {importlib.metadata.version(mod)}")
+        except importlib.metadata.PackageNotFoundError:
+            pass
+    return f"nproc {nproc}{cpu}, {py}" + (f"; {', '.join(libs)}" if libs else "")
 
 
 def section_markdown(

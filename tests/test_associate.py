@@ -154,6 +154,28 @@ def test_adjacent_pieces_of_one_face_become_one_part():
     assert not _kinds(a, "same_primitive")  # over-segmentation repaired silently
 
 
+def test_faces_across_a_gap_that_touch_at_a_few_points_stay_two_parts():
+    # Two CAD faces of one plane, a gap of 1.6 link between them; a row of nine
+    # points of one reaches across and comes within link of the other (Fit4CAD's
+    # PC150). The other face has many points near that row, but the row is
+    # all the first face offers: no boundary is shared.
+    plane = _world_prim("plane", normal=Z, point=[0, 0, 0])
+    # Own generator: the module's one is shared, so these points would depend on the tests run before.
+    P = np.column_stack([np.random.default_rng(3).uniform(-0.5, 0.5, (3000, 2)) * [3.0, 1.5], np.zeros(3000)])
+    pre = preprocess(P, seed=0)
+    link = max(2 * pre.spacing, 1.5 * pre.reach) / pre.transform.scale
+    g = 1.6 * link
+    row = np.column_stack([np.full(9, -g / 2 + 0.5 * link), np.linspace(-0.3, 0.3, 9), np.zeros(9)])
+    left, right = P[P[:, 0] < -g / 2], np.vstack([P[P[:, 0] >= g / 2], row])
+    cyl = (_cyl([0, 3, -1], Z, 0.5, 1.0, 800), _world_prim("cylinder", axis_point=[0, 3, 0], axis=Z, radius=0.5))
+    near_row = np.linalg.norm(left[:, None, :] - row[None], axis=2).min(axis=1) < link
+    assert near_row.sum() > 0.3 * np.sqrt(len(left)) + 3  # one side alone would read as a boundary
+    a = _associate([(left, plane), (right, plane), cyl])
+    merged = next(it for it in a.items_ if it.family.name == "plane")
+    assert sorted(merged.members) == [0, 1] and len(merged.parts) == 2
+    assert _kinds(a, "same_primitive") == [[a.items_.index(merged)]]
+
+
 def test_parallel_planes_closer_than_the_noise_floor_are_not_merged_when_distinct():
     # Two planes 0.02 apart (0.3 % of the diagonal): far beyond the inlier threshold
     # of exact points, so no single plane explains both.

@@ -178,9 +178,9 @@ class Associator:
         Extents are equal within this fraction of their value (and at least
         2 % of the diagonal): they come from the points, not from a fit.
     contact : float
-        Adjacent pieces of one surface become one part when they touch along
-        at least ``contact`` × √(points of the smaller piece) points: a
-        shared boundary, not a corner.
+        Adjacent pieces of one surface become one part when each has at
+        least ``contact`` × √(points of the smaller piece) points touching
+        the other: a shared boundary, not a corner.
 
     Attributes (after :meth:`fit`)
     ----------
@@ -269,8 +269,10 @@ class Associator:
         pieces of one face cut apart by the splitting phase share a boundary
         about as long as their width; two CAD faces of one surface that meet
         at a corner (Fit4CAD: PC104's four faces of one cylinder) touch at a
-        few points. Contact of fewer than ``contact`` × √(points of the
-        smaller) points on both sides is a point contact.
+        few points. A line contact holds at least ``contact`` × √(points of
+        the smaller) points on each side; fewer on either side is a point
+        contact, or two faces a little more than ``link`` apart that come
+        close at a few points (Fit4CAD: PC150's two faces of one cylinder).
         """
         if len(cands) < 2:
             return set()
@@ -290,10 +292,11 @@ class Associator:
         seg_pair, count = np.unique(key // len(idx), return_counts=True)
         i, j = seg_pair // n, seg_pair % n
         lo, hi = np.minimum(i, j), np.maximum(i, j)
-        best: dict[tuple[int, int], int] = {}
+        # Every close pair counts a point on each side, so both ordered pairs are there.
+        least: dict[tuple[int, int], int] = {}
         for u, v, c in zip(lo.tolist(), hi.tolist(), count.tolist()):
-            best[(u, v)] = max(best.get((u, v), 0), c)
-        return {(u, v) for (u, v), c in best.items()
+            least[(u, v)] = min(least.get((u, v), c), c)
+        return {(u, v) for (u, v), c in least.items()
                 if c >= self.contact * np.sqrt(min(sizes[u], sizes[v]))}
 
     def _parts(self, members: list[int], adjacency: set[tuple[int, int]]) -> list[list[int]]:
