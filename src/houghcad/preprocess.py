@@ -158,11 +158,12 @@ def voting_normals(points: np.ndarray, neighbors: np.ndarray, n_triples: int = 2
     for s in range(0, n, chunk):
         nbr = neighbors[s:s + chunk]
         m = len(nbr)
+        # Anchored triples overwrite this draw; it stays so that the random
+        # stream, and every clean cloud's crease normals, keep their values.
+        pick = rng.integers(0, k, size=(m, n_triples, 3))
         if anchored:
-            pick = np.zeros((m, n_triples, 3), dtype=np.int64)
+            pick[:, :, 0] = 0
             pick[:, :, 1:] = rng.integers(1, k, size=(m, n_triples, 2))
-        else:
-            pick = rng.integers(0, k, size=(m, n_triples, 3))
         tri = points[np.take_along_axis(nbr[:, None, :], pick.reshape(m, -1)[:, None, :], axis=2)[:, 0]]
         tri = tri.reshape(m, n_triples, 3, 3)
         nrm = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
