@@ -59,6 +59,9 @@ class Item:
     indices: np.ndarray
     parts: list[np.ndarray]
     members: list[int]
+    #: Keep ``prim`` through the final refit (a fillet whose radius came
+    #: from its tangency to both neighbours; see :mod:`houghcad.blend`).
+    fixed: bool = False
 
 
 @dataclass
@@ -157,6 +160,11 @@ def _clusters(D: np.ndarray, keep: np.ndarray | None = None) -> list[list[int]]:
     return out
 
 
+def _fixed(c: Candidate) -> bool:
+    """Whether a segment's primitive is kept as it is (``extra["constrained"]``)."""
+    return bool(c.extra.get("constrained", False))
+
+
 class Associator:
     """Find maximal primitives and relations between segments (paper §5.4).
 
@@ -212,7 +220,8 @@ class Associator:
         self._E = 0.02 * diag
         # Parts are compared by their final least-squares fits: the recognition
         # fits of small segments can be a degree or two off.
-        cands = [Candidate(c.family, self._refit(c.family, c.prim, np.sort(c.indices)), c.indices, c.mfe)
+        cands = [c if _fixed(c) else
+                 Candidate(c.family, self._refit(c.family, c.prim, np.sort(c.indices)), c.indices, c.mfe, c.extra)
                  for c in cands]
         self._own = [self._mean_residual(c.family, c.prim, c.indices) for c in cands]
         adjacency = self._adjacency(cands, link)
@@ -224,7 +233,7 @@ class Associator:
             parts_of = self._parts(members, adjacency)
             if len(members) == 1:
                 c = cands[members[0]]
-                items.append(Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], members))
+                items.append(Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], members, _fixed(c)))
                 continue
             same.append((members, len(parts_of)))
             idx = np.sort(np.concatenate([cands[m].indices for m in members]))
@@ -240,7 +249,7 @@ class Associator:
             self.items_ = items
         else:
             # Raw segments stay; groups over maximal items expand to their members.
-            raw = [Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], [k])
+            raw = [Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], [k], _fixed(c))
                    for k, c in enumerate(cands)]
             expanded = [RawGroup(g.kind, sorted(m for i in g.members for m in items[i].members), g.descriptors)
                         for g in groups]

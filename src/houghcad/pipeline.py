@@ -10,6 +10,7 @@ import numpy as np
 
 from . import families as fam_mod
 from .associate import Associator, Item, extent
+from .blend import find_fillets
 from .errors import InputError
 from .preprocess import preprocess
 from .recognize import Candidate, Context, mean_fitting_error, recognize, refine
@@ -139,6 +140,10 @@ class Segmenter:
             if revisit_poor_fits(voted, ctx, free, segments):
                 absorb(segments, free, ctx)
                 settle_noisy_edges(segments, ctx, ctx.link)
+            # Fillets shallower than the inlier distance hide in their neighbours.
+            if find_fillets(segments, fams, ctx, free):
+                absorb(segments, free, ctx)
+                settle_noisy_edges(segments, ctx, ctx.link)
         else:
             # On CAD samples the faces' boundary curves lie on both faces.
             settle_edges(segments, ctx, delta, ctx.link)
@@ -209,10 +214,10 @@ class Segmenter:
         check = Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0, max_radius=1e9)
         rng = np.random.default_rng(self.seed)
 
-        def fitted(fam, prim0, idx):
+        def fitted(fam, prim0, idx, fixed=False):
             P, N = pre.points[idx], pre.normals[idx]
             sel = np.arange(len(P)) if len(P) <= 4000 else np.sort(rng.choice(len(P), 4000, replace=False))
-            prim = fam.fit(prim0, P[sel], N[sel])
+            prim = None if fixed else fam.fit(prim0, P[sel], N[sel])
             if prim is None or not fam.valid(prim, check):
                 prim = prim0
             mfe = mean_fitting_error(fam.distance(prim, P) / T.scale, points[idx])
@@ -221,7 +226,7 @@ class Segmenter:
         out: list[Segment] = []
         for k in order:
             it = items[k]
-            params, mfe = fitted(it.family, it.prim, it.indices)
+            params, mfe = fitted(it.family, it.prim, it.indices, it.fixed)
             parts = []
             if len(it.parts) > 1:
                 for p in sorted(it.parts, key=lambda a: (-len(a), int(a[0]))):
