@@ -640,6 +640,11 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
                 for c in recognize(np.sort(region), fams, vctx, avail):
                     got = _covered(c, [segments[m] for m in members], ctx)
                     got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
+                    if peel:
+                        # A carved surface is contiguous: the pieces must touch one
+                        # another, not only the peeled faces (two opposite holes of
+                        # a thin plate lie on one torus through both).
+                        got = _touching(got, edges)
                     if len(got) < 2 or _simple_suffices([segments[m] for m, _, _ in got], ctx):
                         continue
                     removed[[m for m, _, _ in got]] = True
@@ -657,6 +662,23 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
             free[c.indices] = False
         segments[:] = [s for m, s in enumerate(segments) if not removed[m]]
         segments.extend(grow(c, free, ctx) for c in added)
+
+
+def _touching(got: list, edges: np.ndarray) -> list:
+    """The largest set of ``got``'s pieces (position first) connected by ``edges`` (k, 2)."""
+    if len(got) < 2:
+        return got
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    pos = {m: i for i, (m, _, _) in enumerate(got)}
+    e = [(pos[a], pos[b]) for a, b in edges.tolist() if a in pos and b in pos]
+    if not e:
+        return []
+    r, c = np.array(e).T
+    k, lab = connected_components(coo_matrix((np.ones(len(r)), (r, c)), shape=(len(got),) * 2), directed=False)
+    big = np.bincount(lab).argmax()
+    return [g for g, l in zip(got, lab) if l == big]
 
 
 def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rounds: int = 10) -> None:
