@@ -20,8 +20,9 @@ cylinder or cone and a coaxial one: a torus) is tested for that fillet:
 - the fillet is kept when it explains those points better than the sharp
   corner (and the pieces' own primitives) by far more than chance (a
   likelihood-ratio test against the noise) and holds at least
-  ``min_points`` points. Its points then form a new segment, refitted
-  freely; it replaces the pieces.
+  ``min_points`` points. Its points then form a new segment, which keeps
+  the fitted radius and axis (a free refit on a quarter tube a few σ
+  across drifts); it replaces the pieces.
 
 One radius is fitted given the two neighbours' surfaces, so at a sharp edge
 the best r stays near 0: free votes on the same band find spurious cylinders
@@ -39,6 +40,7 @@ from scipy.spatial import cKDTree
 from .families import Family
 from .families.base import Primitive, radial, unit
 from .recognize import Candidate, Context, mean_fitting_error
+from .split import owners
 
 #: Likelihood-ratio threshold: (SSE(sharp) − SSE(fillet)) / σ² must exceed it.
 #: Under an ideal sharp corner the statistic is half χ²(1) and half 0 (r ≥ 0
@@ -326,9 +328,7 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
         return 0
     P = ctx.pre.points
     sigma = float(ctx.pre.noise)
-    owner = np.full(len(P), -1, np.int64)
-    for j, s in enumerate(segments):
-        owner[s.indices] = j
+    owner = owners(segments, len(P))
     seg_pts = np.flatnonzero(owner >= 0)
     pairs = cKDTree(P[seg_pts]).query_pairs(ctx.link, output_type="ndarray")
     a, b = owner[seg_pts[pairs[:, 0]]], owner[seg_pts[pairs[:, 1]]]
@@ -348,6 +348,13 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
     bridged = {(u, v) for k, nb in nbrs.items() for u in nb for v in nb
                if u < v and sizes[k] < min(sizes[u], sizes[v]) and v not in nbrs[u]}
     tol = max(2 * ctx.tau, 0.01 * ctx.pre.diagonal)
+    trees: dict[int, cKDTree] = {}
+
+    def tree(k: int) -> cKDTree:
+        if k not in trees:
+            trees[k] = cKDTree(P[segments[k].indices])
+        return trees[k]
+
     found = []
     for i, j in adj.tolist() + sorted(bridged):
         A, B = segments[i], segments[j]
@@ -361,8 +368,8 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
         # Only the points of each segment near the other: the corner may run
         # along part of a long edge only.
         reach = 0.25 * ctx.pre.diagonal
-        near_a = A.indices[np.isfinite(cKDTree(P[B.indices]).query(P[A.indices], distance_upper_bound=reach)[0])]
-        near_b = B.indices[np.isfinite(cKDTree(P[A.indices]).query(P[B.indices], distance_upper_bound=reach)[0])]
+        near_a = A.indices[np.isfinite(tree(j).query(P[A.indices], distance_upper_bound=reach)[0])]
+        near_b = B.indices[np.isfinite(tree(i).query(P[B.indices], distance_upper_bound=reach)[0])]
         if len(near_a) < ctx.min_points or len(near_b) < ctx.min_points:
             continue
         # Segments touching both may be pieces of the fillet itself.
@@ -373,15 +380,17 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
             gS = np.concatenate([np.full(len(segments[k].indices), k) for k in third])
             dS = np.concatenate([segments[k].family.distance(segments[k].prim, P[segments[k].indices]) for k in third])
             XS = sec.to2d(P[iS])
-        got = fit_fillet(sec.to2d(P[near_a]), sec.to2d(P[near_b]), sec.lines, sigma,
-                         r_cap=0.2 * ctx.pre.diagonal, XS=XS, dS=dS, gS=gS)
+        XA, XB = sec.to2d(P[near_a]), sec.to2d(P[near_b])
+        got = fit_fillet(XA, XB, sec.lines, sigma, r_cap=0.2 * ctx.pre.diagonal, XS=XS, dS=dS, gS=gS)
         if got is None:
             continue
         r, lr, C, t, band, lines, taken = got
         if lr < LR_MIN or r < 2 * sigma:
             continue
+        # The band's points, then the taken pieces' (in XS, they are in label order too).
         pool = np.r_[np.r_[near_a, near_b][band], *(segments[k].indices for k in taken.tolist())]
-        _, on_arc = profile_distance(sec.to2d(P[pool]), C, t, lines[:, :2], r)
+        X2 = np.vstack([np.vstack([XA, XB])[band], *([XS[np.isin(gS, taken)]] if len(taken) else [])])
+        _, on_arc = profile_distance(X2, C, t, lines[:, :2], r)
         idx = pool[on_arc]
         if len(idx) < ctx.min_points:
             continue
@@ -395,11 +404,10 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
                                        "major_radius": float(O[0]), "minor_radius": float(r)})
         if not fam.valid(prim, ctx):
             continue
-        rest = pool[~on_arc]
         # What the taken segments held off the arc goes to the nearer neighbour.
-        rest = rest[np.isin(owner[rest], taken)]
-        dA = np.abs(sec.to2d(P[rest]) @ lines[0, :2] - lines[0, 2])
-        dB = np.abs(sec.to2d(P[rest]) @ lines[1, :2] - lines[1, 2])
+        off = ~on_arc & np.isin(owner[pool], taken)
+        rest = pool[off]
+        dA, dB = np.abs(X2[off] @ lines[:, :2].T - lines[:, 2]).T
         found.append((lr, i, j, taken.tolist(), fam, prim, idx, rest, dA <= dB, np.minimum(dA, dB) <= ctx.tau))
     # Strongest first; a segment gives points to one fillet per pass.
     used: set[int] = set()
