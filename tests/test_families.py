@@ -259,3 +259,27 @@ def test_descriptors_are_position_independent(family):
     assert d1.keys() == d2.keys()
     for k in d1:
         assert d1[k] == pytest.approx(d2[k])
+
+
+def test_signed_distance_is_positive_along_the_surface_normals():
+    # The generic foot test against the closed forms: plane n·x − d, cylinder ρ − R,
+    # sphere |x − c| − R, torus hypot(ρ − R, h) − r.
+    from houghcad.families import REGISTRY
+    from houghcad.families.base import Primitive, radial
+
+    rng = np.random.default_rng(0)
+    P = rng.uniform(-1.5, 1.5, (500, 3))
+    a = np.array([0.3, -0.2, 0.93])
+    a /= np.linalg.norm(a)
+    c = np.array([0.1, 0.2, -0.1])
+    cases = [
+        (Primitive("plane", {"normal": a, "offset": 0.2}), P @ a - 0.2),
+        (Primitive("cylinder", {"axis_point": c, "axis": a, "radius": 0.7}), radial(P, c, a)[1] - 0.7),
+        (Primitive("sphere", {"center": c, "radius": 0.8}), np.linalg.norm(P - c, axis=1) - 0.8),
+        (Primitive("torus", {"center": c, "axis": a, "major_radius": 0.9, "minor_radius": 0.3}),
+         np.hypot(radial(P, c, a)[1] - 0.9, radial(P, c, a)[0]) - 0.3),
+    ]
+    for prim, exact in cases:
+        got = REGISTRY[prim.family].signed_distance(prim, P)
+        clear = np.abs(exact) > 1e-6
+        np.testing.assert_allclose(got[clear], exact[clear], atol=1e-9, err_msg=prim.family)

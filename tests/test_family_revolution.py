@@ -129,3 +129,33 @@ def test_batched_three_by_three_solve_matches_the_pseudo_inverse():
     # Other shapes take the pseudo-inverse path.
     x2, ok2 = rev._solve_batched(A[..., :2, :], b[..., :2])
     assert x2.shape == (40, 30, 3) and ok2.shape == (40, 30)
+
+
+def test_closed_surfaces_thinner_than_the_inlier_band_are_not_surfaces():
+    # A noisy disc's points, above and below it, lie on a flat ring of ellipse profile
+    # whose two sheets are within tau of each other (it fitted them to 0.4 σ, half the
+    # noise): an envelope of the layer, rejected; so are a torus and an ellipsoid as thin.
+    from types import SimpleNamespace
+
+    ctx = SimpleNamespace(tau=0.024, max_radius=1.0)
+    sor = REGISTRY["surface_of_revolution"]
+
+    def ring(q):
+        return Primitive("surface_of_revolution", {"axis_point": np.zeros(3), "axis": np.array([0.0, 0, 1]),
+                                                   "profile": "ellipse", "theta": np.array([0.04, 0.034, q])})
+
+    assert not sor.valid(ring(0.0075), ctx)
+    assert sor.valid(ring(0.02), ctx)
+    torus = REGISTRY["torus"]
+    assert not torus.valid(Primitive("torus", {"center": np.zeros(3), "axis": np.array([0.0, 0, 1]),
+                                               "major_radius": 0.3, "minor_radius": 0.01}), ctx)
+    assert torus.valid(Primitive("torus", {"center": np.zeros(3), "axis": np.array([0.0, 0, 1]),
+                                           "major_radius": 0.3, "minor_radius": 0.05}), ctx)
+    ell = REGISTRY["ellipsoid"]
+
+    def ellipsoid(c):
+        return Primitive("ellipsoid", {"center": np.zeros(3), "axes": np.eye(3), "semi_axes": np.array([0.3, 0.2, c]),
+                                       "axis": np.array([0.0, 0, 1])})
+
+    assert not ell.valid(ellipsoid(0.01), ctx)
+    assert ell.valid(ellipsoid(0.1), ctx)

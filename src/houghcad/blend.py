@@ -181,6 +181,31 @@ def profile_distance(X: np.ndarray, C: np.ndarray, t: np.ndarray, n: np.ndarray,
     return dist, on_arc
 
 
+@dataclass
+class Arc:
+    """A fillet's rounded corner, for the boundaries drawn after it is found.
+
+    Its torus or cylinder goes on past the arc, and its two faces' surfaces
+    past the tangent points into the corner; near a fillet a few σ across,
+    nearest-surface boundaries on those unbounded surfaces hand much of the
+    arc to its faces and give it points of theirs. The rounded profile (two
+    rays from the tangent points and the arc between them) draws them as the
+    fillet was found.
+    """
+
+    section: Section
+    C: np.ndarray  # (2,) the sharp corner
+    t: np.ndarray  # (2, 2) the rays' unit directions
+    n: np.ndarray  # (2, 2) the lines' unit normals
+    r: float
+
+    def distance(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Distance of points P (m, 3) to the arc and whether the rounded
+        profile puts them on it (m,); off it the distance is inf."""
+        d, on = profile_distance(self.section.to2d(P), self.C, self.t, self.n, self.r)
+        return np.where(on, d, np.inf), on
+
+
 def _corner(L: np.ndarray) -> np.ndarray:
     return np.linalg.solve(L[:, :2], L[:, 2])
 
@@ -408,12 +433,13 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
         off = ~on_arc & np.isin(owner[pool], taken)
         rest = pool[off]
         dA, dB = np.abs(X2[off] @ lines[:, :2].T - lines[:, 2]).T
-        found.append((lr, i, j, taken.tolist(), fam, prim, idx, rest, dA <= dB, np.minimum(dA, dB) <= ctx.tau))
+        found.append((lr, i, j, taken.tolist(), fam, prim, idx, rest, dA <= dB, np.minimum(dA, dB) <= ctx.tau,
+                      (sec, C, t, lines, r)))
     # Strongest first; a segment gives points to one fillet per pass.
     used: set[int] = set()
     drop: set[int] = set()
     added = 0
-    for lr, i, j, taken, fam, prim, idx, rest, to_a, close in sorted(found, key=lambda f: -f[0]):
+    for lr, i, j, taken, fam, prim, idx, rest, to_a, close, (sec, C, t, lines, r) in sorted(found, key=lambda f: -f[0]):
         if used & {i, j, *taken}:
             continue
         keep = [np.setdiff1d(segments[k].indices, idx) for k in (i, j)]
@@ -430,8 +456,9 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
         # across, a free torus or cylinder trades its radius for its axis
         # and drifts (minor radius 0.49 for a true 0.28); the tangency to
         # both neighbours pins it.
+        arc = Arc(sec, C, t, lines[:, :2].copy(), float(r))
         segments.append(Candidate(fam, prim, np.sort(idx), mean_fitting_error(d, P[idx]),
-                                  extra={"constrained": True}))
+                                  extra={"constrained": True, "arc": arc}))
         used |= {i, j, *taken}
         drop |= set(taken)
         added += 1

@@ -247,6 +247,21 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candida
     return select(out, free, ctx)
 
 
+def surface_distance(s: Candidate, P: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Distance (m,) of points P (m, 3) to segment s's surface, and which of
+    them s claims outright (bool (m,)) or None.
+
+    A fillet found by :mod:`houghcad.blend` (``extra["arc"]``) is bounded to
+    its arc: the points its rounded corner puts on its faces are at infinity
+    from it, and those it puts on the arc are its own, whatever the faces'
+    unbounded surfaces say there.
+    """
+    arc = s.extra.get("arc")
+    if arc is None:
+        return s.family.distance(s.prim, P), None
+    return arc.distance(P)
+
+
 def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
     """Give each leftover point to the segment of its nearest assigned
     neighbour when it lies within ε (noisy clouds: τ) of that segment's primitive."""
@@ -264,7 +279,7 @@ def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
         s = segments[k]
         # On a noisy cloud ε is 6 σ: a band that wide beyond a surface is
         # another surface's (its own points lie within τ = 3 σ).
-        pts = pts[s.family.distance(s.prim, P[pts]) < (ctx.tau if ctx.noisy else ctx.epsilon)]
+        pts = pts[surface_distance(s, P[pts])[0] < (ctx.tau if ctx.noisy else ctx.epsilon)]
         if len(pts):
             free[pts] = False
             segments[k] = replace(s, indices=np.union1d(s.indices, pts))
@@ -348,13 +363,17 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
     faces; whoever was accepted or grown first took a band up to ε wide of its
     neighbour's points. The nearest surface (among the point's own segment and
     the segments of its neighbours within ``reach``, with the estimated normal
-    within the angle tolerance of that surface's) is the likelier face. Each
-    round moves the points next to the current boundary, so the boundary
+    within the angle tolerance of that surface's) is the likelier face, except
+    where a point lies where only one of two faces meeting at an edge reaches
+    (see :func:`_sides`) and near a fillet found by :mod:`houghcad.blend`,
+    whose rounded corner draws its boundaries (see :func:`surface_distance`).
+    Each round moves the points next to the current boundary, so the boundary
     walks to where the surfaces cross; a segment keeps at least min_points.
     """
     if len(segments) < 2:
         return
     P, N = ctx.pre.points, ctx.pre.normals
+    side = None
     for _ in range(rounds):
         owner = owners(segments, len(P))
         pts = np.flatnonzero(owner >= 0)
@@ -363,22 +382,92 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
         if not mask.any():
             return
         pairs = np.unique(np.stack([other[mask], np.broadcast_to(pts[:, None], other.shape)[mask]], 1), axis=0)
+        if side is None:
+            side = _sides(segments, np.unique(np.stack([owner[pairs[:, 1]], pairs[:, 0]], 1), axis=0), ctx)
         edge = np.unique(pairs[:, 1])
         best = owner.copy()
         best_d = np.full(len(P), np.inf)
+        own_s = np.zeros(len(P))
+        held = np.zeros(len(P), bool)  # claimed by a fillet's arc (see surface_distance)
         for j in np.unique(owner[edge]):
             e = edge[owner[edge] == j]
-            best_d[e] = segments[j].family.distance(segments[j].prim, P[e])
+            best_d[e], claim = surface_distance(segments[j], P[e])
+            own_s[e] = segments[j].family.signed_distance(segments[j].prim, P[e])
+            if claim is not None:
+                held[e[claim & (best_d[e] < ctx.tau)]] = True
         for j in np.unique(pairs[:, 0]):
             cand = pairs[pairs[:, 0] == j, 1]
             s = segments[j]
-            d = s.family.distance(s.prim, P[cand])
+            d, claim = surface_distance(s, P[cand])
             sn = s.family.surface_normals(s.prim, P[cand])
-            ok = (d < best_d[cand]) & (np.abs(np.einsum("ij,ij->i", sn, N[cand])) >= ctx.cos_angle)
+            a = owner[cand]
+            # Where the point lies against the two faces' sides of each
+            # other (see _sides): a point that only j's face could have
+            # produced goes to j, one that only its owner's could stays.
+            mine = own_s[cand] * side[j, a] >= 0
+            theirs = s.family.signed_distance(s.prim, P[cand]) * side[a, j] >= 0
+            # (The estimated normals blur across an edge: they judge only
+            # the points either face could have produced.)
+            near = (d < best_d[cand]) & (np.abs(np.einsum("ij,ij->i", sn, N[cand])) >= ctx.cos_angle)
+            ok = np.where(mine & ~theirs, d < ctx.tau, np.where(theirs & ~mine, False, near)) & ~held[cand]
+            if claim is not None:
+                ok |= claim & (d < ctx.tau) & ~held[cand]
+                held[cand[ok]] = True
             best[cand[ok]] = j
             best_d[cand[ok]] = d[ok]
         if not _reassign(segments, owner, best, ctx.min_points):
             return
+
+
+def _sides(segments: list[Candidate], pairs: np.ndarray, ctx: Context) -> np.ndarray:
+    """side[a, b]: the side of b's surface (+1 along its normals, -1, 0
+    unclear) on which a's points lie near their contact, for the segment
+    pairs (m, 2); an (n, n) int8 array, 0 elsewhere.
+
+    Two faces meeting at an edge each stop at the other: face a lies on one
+    side of b's surface. A noisy point beyond a convex edge, on the far side
+    of b from a's face, is a's only if its foot on b would fall outside b's
+    face, where b has no points; a nearest-surface rule gives it to b
+    whenever b's surface is nearer. The side is read on a's points within
+    3 links of b's that lie clearly off b's surface (beyond tau), by a
+    majority of 80 %; both faces' sides must be clear.
+    """
+    n = len(segments)
+    P = ctx.pre.points
+    side = np.zeros((n, n), np.int8)
+    # A wrong primitive (a cylinder across a wall and its two corners) fits
+    # clearly worse than the part's faces do, and its sides would spread
+    # the error: it keeps the nearer-surface rule.
+    fit = np.array([s.family.distance(s.prim, P[s.indices]).mean() for s in segments])
+    sound = fit <= 1.5 * np.median(fit)
+    trees: dict[int, cKDTree] = {}
+    for a, b in {(int(min(u, v)), int(max(u, v))) for u, v in pairs.tolist() if u != v}:
+        if not (sound[a] and sound[b]):
+            continue
+        for x, y in ((a, b), (b, a)):
+            if y not in trees:
+                trees[y] = cKDTree(P[segments[y].indices])
+            Q = P[segments[x].indices]
+            Q = Q[np.isfinite(trees[y].query(Q, distance_upper_bound=3 * ctx.link)[0])]
+            if len(Q) < ctx.min_points:
+                continue
+            # Tangent there (a plane and the wide cylinder beside it on one
+            # noisy face): no edge, and the nearer surface decides.
+            cos = np.abs(np.einsum("ij,ij->i", segments[x].family.surface_normals(segments[x].prim, Q),
+                                   segments[y].family.surface_normals(segments[y].prim, Q)))
+            if np.median(cos) >= ctx.cos_angle:
+                continue
+            sd = segments[y].family.signed_distance(segments[y].prim, Q)
+            sd = sd[np.abs(sd) >= ctx.tau]
+            if len(sd) >= ctx.min_points:
+                f = float(np.mean(sd > 0))
+                side[x, y] = 1 if f >= 0.8 else -1 if f <= 0.2 else 0
+        # An edge has each face on one side of the other; a face that
+        # crosses the other (a T-junction) or straddles it (a wrong
+        # primitive cutting through a face) leaves the pair to nearness.
+        if side[a, b] == 0 or side[b, a] == 0:
+            side[a, b] = side[b, a] = 0
+    return side
 
 
 def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, reach: float,
@@ -431,7 +520,8 @@ def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, re
         del segments[j]
 
 
-def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth: bool = True) -> np.ndarray:
+def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth: bool = True,
+                     crease: float | None = None) -> np.ndarray:
     """Pairs (m, 2) of segments that meet along a tangent-continuous boundary.
 
     Two segments touch where a point of one has a neighbour (within ``link``)
@@ -439,7 +529,9 @@ def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth
     those points agree within the angle tolerance (the fitted surfaces', not
     the estimated normals, which blur across a crease) for most contacts.
     A pair needs at least √(points of the smaller) / 3 contact points, and 3:
-    a boundary, not a corner. ``smooth=False``: any such contact.
+    a boundary, not a corner. ``smooth=False``: any such contact. ``crease``
+    (radians): the angle within which normals agree (default: half the
+    angle tolerance).
     """
     if len(segments) < 2:
         return np.zeros((0, 2), np.int64)
@@ -464,7 +556,7 @@ def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth
     # between two faces is still a crease).
     key = np.unique(pair * len(P) + pi)
     pair_u, count = np.unique(key // len(P), return_counts=True)
-    agree = cos[mask] >= np.cos(0.5 * ctx.angle)
+    agree = cos[mask] >= np.cos(0.5 * ctx.angle if crease is None else crease)
     share = np.bincount(np.searchsorted(pair_u, pair), weights=agree, minlength=len(pair_u)) / \
         np.bincount(np.searchsorted(pair_u, pair), minlength=len(pair_u))
     sizes = np.array([len(s.indices) for s in segments])
@@ -604,6 +696,11 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
         # group that is not one complex surface, which most groups of simple
         # faces are not (a plane, a fillet and a plane).
         votes.append((joined, cplx, ctx, False))
+        if ctx.noisy:
+            # Planes and spheres that slice a noisy curved surface meet at
+            # creases wider than a face's own normals wander: joined up to
+            # the normals' tolerance, they make the group again.
+            votes.append((smooth_adjacency(segments, ctx, crease=ctx.angle), cplx, ctx, False))
     if per_cluster:
         # The bands of a noisy cone fit to the noise each, and their fitted
         # normals often disagree at their contacts: after the tangent-joined
@@ -612,11 +709,18 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
         lctx = replace(ctx, local=True)
         votes.append((joined, per_cluster, lctx, True))
         votes.append((smooth_adjacency(segments, ctx, smooth=False), per_cluster, lctx, True))
+    # A wider grouping repeats most groups: each (families, members) is voted
+    # once (a vote that took nothing would take nothing again).
+    voted: set[tuple[int, ...]] = set()
     for edges, fams, vctx, peel in votes:
         g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
         ncomp, lab = connected_components(g, directed=False)
         for comp in range(ncomp):
             members = np.flatnonzero((lab == comp) & ~removed)
+            key = (id(fams), peel, *members.tolist())
+            if key in voted:
+                continue
+            voted.add(key)
             if peel:
                 # Segments of these families are whole surfaces already.
                 members = np.array([m for m in members if segments[m].family not in fams], dtype=np.int64)
@@ -682,14 +786,15 @@ def _touching(got: list, edges: np.ndarray) -> list:
 
 
 def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rounds: int = 10) -> None:
-    """Each complex segment, or on a noisy cloud one of a family voted per
-    cluster (cone, torus), takes the adjacent segments that lie on its
-    surface (a complex one only smaller ones), in place.
+    """Each complex segment, or on a noisy cloud any segment, takes the
+    adjacent segments that lie on its surface (a complex one only smaller
+    ones), in place.
 
     On a noisy cloud the whole-cloud round places a cone or torus from all
     the normals, which fits one of them at most: the others' slices go to
     simpler families (two cylinder bands of a cone) before a cluster round
-    finds the rest.
+    finds the rest. Noise also lets a wide cylinder take part of a plane
+    face beside the plane's own segment: the plane takes it back.
 
     Pieces of one complex surface found apart (by different clusters, or
     after a seam cut a group) each fit their own small patch; association
@@ -707,7 +812,7 @@ def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rou
         segs: list[Candidate | None] = list(segments)
         for i in order:
             c = segs[i]
-            if c is None or (c.family.simple and (c.family.global_search or not ctx.noisy)):
+            if c is None or (c.family.simple and not ctx.noisy):
                 continue
             nbrs = np.unique(np.r_[edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]])
             # A cone or torus piece may be the smallest of its surface's pieces
@@ -720,7 +825,9 @@ def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rou
             take = [(nbrs[k], q) for k, q, _ in got]
             rest = sorted(set(nbrs) - {j for j, _ in take})
             key = (len(c.indices), int(c.indices[0]), *(int(segs[j].indices[0]) for j in rest))
-            if rest and key not in tried:
+            # (A segment of a whole-cloud family, found on a whole face, has
+            # firm parameters: it only takes what it covers.)
+            if rest and key not in tried and not (c.family.simple and c.family.global_search):
                 tried.add(key)
                 # Pieces fitted apart on small patches have loose parameters:
                 # vote the family again on them and the segment.

@@ -239,7 +239,8 @@ class Ellipsoid(Family):
 
     def valid(self, prim, ctx):
         e = np.asarray(prim.params["semi_axes"], float)
-        if not (np.all(np.isfinite(e)) and e.min() > 0 and e.max() < 2.0 * ctx.max_radius):
+        # Thinner than the inlier band, it envelops a noisy layer (a disc).
+        if not (np.all(np.isfinite(e)) and e.min() >= 0.5 * ctx.tau and e.min() > 0 and e.max() < 2.0 * ctx.max_radius):
             return False
         # A pancake (min/max < 0.05) is a disc: the plane covers it.
         return SPHERE_TOL < (e.max() - e.min()) / e.max() and e.min() > 0.05 * e.max()

@@ -528,7 +528,15 @@ class SurfaceOfRevolution(Family):
             return False
         if any(k == "length" and abs(v) > 4.0 * ctx.max_radius for k, v in zip(prof.kinds, th)):
             return False
-        return prof.check is None or bool(prof.check(_theta_dict(prof, th)))
+        if prof.check is not None and not prof.check(_theta_dict(prof, th)):
+            return False
+        if prof.periodic:
+            # A closed meridian thinner than the inlier band is an envelope of
+            # a noisy layer (a pancake ring round a disc), not a surface.
+            u = np.linspace(*prof.u_range, 64)
+            thin = min(np.ptp(prof.f1(u, *th)), np.ptp(prof.f2(u, *th)))
+            return bool(thin >= ctx.tau)
+        return True
 
     def fit(self, prim, P, N):
         # Residuals need foot points on the profile: a regular subsample of

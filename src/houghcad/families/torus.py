@@ -70,7 +70,8 @@ class Torus(Family):
 
     def valid(self, prim, ctx):
         p = prim.params
-        return 0 < p["minor_radius"] < ctx.max_radius and 0 <= p["major_radius"] < ctx.max_radius
+        # A tube thinner than the inlier band envelops a noisy curve's points.
+        return 0.5 * ctx.tau <= p["minor_radius"] < ctx.max_radius and 0 <= p["major_radius"] < ctx.max_radius
 
     def fit(self, prim, P, N):
         c0, a0 = prim.params["center"], unit(prim.params["axis"])
