@@ -425,3 +425,39 @@ def test_noisy_dome_read_as_planes_is_voted_whole_again():
     inter = len(np.intersect1d(best.indices, dome))
     assert best.type == "ellipsoid"
     assert 2 * inter / (len(best.indices) + len(dome)) >= 0.9
+
+
+def test_noisy_curved_segment_that_a_plane_fits_as_well_becomes_a_plane():
+    from houghcad.families import REGISTRY, select
+    from houghcad.families.base import Primitive
+    from houghcad.recognize import Candidate
+    from houghcad.split import prefer_planes
+
+    # A cylinder of radius 50 diagonals on a noisy plane face: flat within the noise.
+    cloud = synth.single("plane", 0, n_points=3000, noise=0.005)
+    ctx = _context(cloud.points)
+    P = ctx.pre.points
+    flat = _plane_segment(ctx, np.arange(len(P)))
+    n = flat.prim.params["normal"]
+    e = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+    e /= np.linalg.norm(e)
+    c0 = P.mean(axis=0)
+    R = 50.0 * ctx.pre.diagonal
+    cyl = Primitive("cylinder", {"axis_point": c0 - (c0 @ n - flat.prim.params["offset"]) * n + R * n,
+                                 "axis": e, "radius": R})
+    segments = [Candidate(REGISTRY["cylinder"], cyl, flat.indices, 0.0)]
+    assert prefer_planes(segments, select("simple"), ctx) == 1
+    assert segments[0].family.name == "plane" and len(segments[0].indices) == len(P)
+    # Without the plane family selected, nothing changes.
+    segments = [Candidate(REGISTRY["cylinder"], cyl, flat.indices, 0.0)]
+    assert prefer_planes(segments, select("cylinder"), ctx) == 0
+    # A noisy cylinder (its true primitive, in the standard frame) stays one.
+    cloud = synth.single("cylinder", 0, n_points=3000, noise=0.005)
+    ctx = _context(cloud.points)
+    T = ctx.pre.transform
+    g = cloud.primitives[0]["params"]
+    prim = Primitive("cylinder", {"axis_point": T.points(np.asarray(g["axis_point"])[None])[0],
+                                  "axis": T.dirs(np.asarray(g["axis"])[None])[0], "radius": T.scale * g["radius"]})
+    segments = [Candidate(REGISTRY["cylinder"], prim, np.flatnonzero(cloud.labels == 0), 0.0)]
+    assert prefer_planes(segments, select("simple"), ctx) == 0
+    assert segments[0].family.name == "cylinder"

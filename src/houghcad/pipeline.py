@@ -15,8 +15,8 @@ from .errors import InputError
 from .preprocess import preprocess
 from .recognize import Candidate, Context, mean_fitting_error, recognize, refine
 from .result import GROUP_KINDS, Group, Part, Result, Segment
-from .split import absorb, accept, consolidate, dissolve_redundant, revisit_poor_fits, settle_edges, \
-    settle_noisy_edges, splitting_phase
+from .split import absorb, accept, consolidate, dissolve_redundant, prefer_planes, revisit_poor_fits, \
+    settle_edges, settle_noisy_edges, splitting_phase
 
 
 class Segmenter:
@@ -144,6 +144,8 @@ class Segmenter:
             if find_fillets(segments, fams, ctx, free):
                 absorb(segments, free, ctx)
                 settle_noisy_edges(segments, ctx, ctx.link)
+            # Curved primitives flat within the noise are planes.
+            prefer_planes(segments, fams, ctx)
         else:
             # On CAD samples the faces' boundary curves lie on both faces.
             settle_edges(segments, ctx, delta, ctx.link)

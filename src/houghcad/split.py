@@ -419,6 +419,43 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
             return
 
 
+def prefer_planes(segments: list[Candidate], families: list[Family], ctx: Context) -> int:
+    """On a noisy cloud, give a plane to each curved segment that a plane
+    fits as well, in place; returns how many.
+
+    A cylinder or sphere of radius many times a face's width sags off it by
+    less than the noise: on a noisy plane face it fits as well as the plane
+    and may win the face by size (radii of 66 and 250 diagonals after the
+    final refit, on two box faces). A cylinder, sphere or torus is compared
+    with the plane by MSAC cost over all the segment's points; the plane
+    takes the segment unless it is worse by more than two standard errors
+    (so does a short arc of a small hole that the noise leaves flat). A
+    fillet found by :mod:`houghcad.blend` keeps its primitive.
+    """
+    plane = next((f for f in families if f.name == "plane"), None)
+    if plane is None or not ctx.noisy:
+        return 0
+    P, N = ctx.pre.points, ctx.pre.normals
+    changed = 0
+    for k, s in enumerate(segments):
+        if s.family.name not in ("cylinder", "sphere", "torus") or s.extra.get("constrained") or len(s.indices) < 10:
+            continue
+        Q = P[s.indices]
+        c = Q.mean(axis=0)
+        n0 = np.linalg.eigh(np.cov(Q.T))[1][:, 0]
+        prim = plane.fit(Primitive("plane", {"normal": n0, "offset": float(n0 @ c)}), Q, N[s.indices])
+        if prim is None:
+            continue
+        d_own = np.minimum(s.family.distance(s.prim, Q), ctx.tau)
+        d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
+        if d_pl.mean() > d_own.mean() + 2.0 * d_own.std() / np.sqrt(len(Q)):
+            continue
+        d = plane.distance(prim, Q)
+        segments[k] = Candidate(plane, prim, s.indices, mean_fitting_error(d, Q), {"d": d})
+        changed += 1
+    return changed
+
+
 def _sides(segments: list[Candidate], pairs: np.ndarray, ctx: Context) -> np.ndarray:
     """side[a, b]: the side of b's surface (+1 along its normals, -1, 0
     unclear) on which a's points lie near their contact, for the segment
