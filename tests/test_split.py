@@ -381,11 +381,26 @@ def test_sides_of_two_faces_at_an_edge_and_of_a_plane_and_a_wide_cylinder():
     assert not _sides([rest, piece], np.array([[0, 1]]), ctx).any()
 
 
+def _wide_cylinder(ctx, flat):
+    """A cylinder of radius 50 diagonals tangent to the plane segment ``flat``
+    at its centroid (flat within any noise over the cloud), and the unit
+    vector across its axis in the plane."""
+    from houghcad.families.base import Primitive
+
+    P = ctx.pre.points
+    n = flat.prim.params["normal"]
+    e = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+    e /= np.linalg.norm(e)
+    c0 = P.mean(axis=0)
+    R = 50.0 * ctx.pre.diagonal
+    foot = c0 - (c0 @ n - flat.prim.params["offset"]) * n
+    return Primitive("cylinder", {"axis_point": foot + R * n, "axis": e, "radius": R}), np.cross(n, e)
+
+
 def test_noisy_plane_takes_back_the_wide_cylinder_on_its_face():
     # Noise lets a cylinder of radius ~50 diagonals take part of a plane face
     # beside the plane's own segment; the plane covers it and takes it back.
     from houghcad.families import REGISTRY
-    from houghcad.families.base import Primitive
     from houghcad.recognize import Candidate
     from houghcad.split import merge_complex
 
@@ -393,15 +408,8 @@ def test_noisy_plane_takes_back_the_wide_cylinder_on_its_face():
     ctx = _context(cloud.points)
     assert ctx.noisy
     P = ctx.pre.points
-    whole = _plane_segment(ctx, np.arange(len(P)))
-    n = whole.prim.params["normal"]
-    e = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
-    e /= np.linalg.norm(e)
-    c0 = P.mean(axis=0)
-    R = 50.0 * ctx.pre.diagonal
-    cyl = Primitive("cylinder", {"axis_point": c0 - (c0 @ n - whole.prim.params["offset"]) * n + R * n,
-                                 "axis": e, "radius": R})
-    u = (P - c0) @ np.cross(n, e)
+    cyl, across = _wide_cylinder(ctx, _plane_segment(ctx, np.arange(len(P))))
+    u = (P - P.mean(axis=0)) @ across
     piece = np.flatnonzero(u > np.quantile(u, 0.6))
     d = REGISTRY["cylinder"].distance(cyl, P[piece])
     segments = [_plane_segment(ctx, np.flatnonzero(u <= np.quantile(u, 0.6))),
@@ -438,13 +446,7 @@ def test_noisy_curved_segment_that_a_plane_fits_as_well_becomes_a_plane():
     ctx = _context(cloud.points)
     P = ctx.pre.points
     flat = _plane_segment(ctx, np.arange(len(P)))
-    n = flat.prim.params["normal"]
-    e = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
-    e /= np.linalg.norm(e)
-    c0 = P.mean(axis=0)
-    R = 50.0 * ctx.pre.diagonal
-    cyl = Primitive("cylinder", {"axis_point": c0 - (c0 @ n - flat.prim.params["offset"]) * n + R * n,
-                                 "axis": e, "radius": R})
+    cyl, _ = _wide_cylinder(ctx, flat)
     segments = [Candidate(REGISTRY["cylinder"], cyl, flat.indices, 0.0)]
     assert prefer_planes(segments, select("simple"), ctx) == 1
     assert segments[0].family.name == "plane" and len(segments[0].indices) == len(P)
