@@ -247,9 +247,11 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candida
     return select(out, free, ctx)
 
 
-def surface_distance(s: Candidate, P: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+def surface_distance(s: Candidate, P: np.ndarray, signed: np.ndarray | None = None) \
+        -> tuple[np.ndarray, np.ndarray | None]:
     """Distance (m,) of points P (m, 3) to segment s's surface, and which of
-    them s claims outright (bool (m,)) or None.
+    them s claims outright (bool (m,)) or None. ``signed``: the points'
+    signed distances to s's primitive when the caller has them already.
 
     A fillet found by :mod:`houghcad.blend` (``extra["arc"]``) is bounded to
     its arc: the points its rounded corner puts on its faces are at infinity
@@ -257,9 +259,9 @@ def surface_distance(s: Candidate, P: np.ndarray) -> tuple[np.ndarray, np.ndarra
     unbounded surfaces say there.
     """
     arc = s.extra.get("arc")
-    if arc is None:
-        return s.family.distance(s.prim, P), None
-    return arc.distance(P)
+    if arc is not None:
+        return arc.distance(P)
+    return (s.family.distance(s.prim, P) if signed is None else np.abs(signed)), None
 
 
 def absorb(segments: list[Candidate], free: np.ndarray, ctx: Context) -> None:
@@ -391,21 +393,22 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
         held = np.zeros(len(P), bool)  # claimed by a fillet's arc (see surface_distance)
         for j in np.unique(owner[edge]):
             e = edge[owner[edge] == j]
-            best_d[e], claim = surface_distance(segments[j], P[e])
             own_s[e] = segments[j].family.signed_distance(segments[j].prim, P[e])
+            best_d[e], claim = surface_distance(segments[j], P[e], own_s[e])
             if claim is not None:
                 held[e[claim & (best_d[e] < ctx.tau)]] = True
         for j in np.unique(pairs[:, 0]):
             cand = pairs[pairs[:, 0] == j, 1]
             s = segments[j]
-            d, claim = surface_distance(s, P[cand])
+            sd = s.family.signed_distance(s.prim, P[cand])
+            d, claim = surface_distance(s, P[cand], sd)
             sn = s.family.surface_normals(s.prim, P[cand])
             a = owner[cand]
             # Where the point lies against the two faces' sides of each
             # other (see _sides): a point that only j's face could have
             # produced goes to j, one that only its owner's could stays.
             mine = own_s[cand] * side[j, a] >= 0
-            theirs = s.family.signed_distance(s.prim, P[cand]) * side[a, j] >= 0
+            theirs = sd * side[a, j] >= 0
             # (The estimated normals blur across an edge: they judge only
             # the points either face could have produced.)
             near = (d < best_d[cand]) & (np.abs(np.einsum("ij,ij->i", sn, N[cand])) >= ctx.cos_angle)
