@@ -13,7 +13,7 @@ from houghcad.families import REGISTRY, select as select_families
 from houghcad.pipeline import Segmenter
 from houghcad.preprocess import preprocess
 from houghcad.evaluate import parameter_errors
-from houghcad.recognize import Candidate, _noise_floored, mean_fitting_error, recognize
+from houghcad.recognize import Candidate, _noise_floored, mean_fitting_error, recognize, select
 
 
 def _context(points):
@@ -90,3 +90,24 @@ def test_wide_noisy_cone_is_not_read_as_a_sphere():
     assert len(best.indices) >= 0.9 * len(cloud.points)
     err = parameter_errors("cone", cloud.primitives[0]["params"], best.params, cloud.diagonal(), cloud.points)
     assert err["half_angle_deg"] <= 1.0 and err["axis_deg"] <= 1.0
+
+
+def test_a_candidate_competes_with_every_one_it_would_displace():
+    # Fit4CAD's PC172 with all families: a generalised cylinder bent round a
+    # hexagonal nut shared under half of each small face's plane candidate,
+    # so it was never compared with them, yet took enough of each that none
+    # kept the share it needs to be accepted after it.
+    cloud = synth.single("plane", 0, n_points=2000)
+    ctx = replace(_context(cloud.points), min_points=20)
+    P = ctx.pre.points
+
+    def cand(name, idx, d):
+        d = np.full(len(idx), d)
+        return Candidate(REGISTRY[name], None, idx, mean_fitting_error(d, P[idx]), {"d": d})
+
+    a, b = np.arange(0, 100), np.arange(100, 200)
+    wide = np.r_[a[:45], b[:45], np.arange(200, 300)]
+    cands = [cand("plane", a, 0.0), cand("plane", b, 0.0), cand("generalized_cylinder", wide, 0.2 * ctx.tau)]
+    got = select(cands, np.ones(len(P), bool), ctx)
+    assert [c.family.name for c in got] == ["plane", "plane"]
+    assert [len(c.indices) for c in got] == [100, 100]

@@ -303,11 +303,16 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     return out
 
 
+#: Share of its points a selected candidate must still hold free to be accepted.
+KEEP_SHARE = 0.6
+
+
 def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candidate]:
     """Greedy choice among competing candidates.
 
     After the point-wise competition, largest first; a candidate competes with
-    the others that share more than half of the smaller one's points, and
+    the others that share more than 1 − ``KEEP_SHARE`` of the smaller one's
+    points (taking either would leave the other too few to be accepted), and
     among them the lowest MFE wins (a more complex family must beat a simpler
     one clearly).
     """
@@ -326,7 +331,10 @@ def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candi
             if j == i or done[j]:
                 continue
             inter = np.intersect1d(sets[i], sets[j], assume_unique=True).size
-            if inter > 0.5 * min(len(sets[i]), len(sets[j])):
+            # Whichever is taken, the other must keep KEEP_SHARE of its points
+            # to be accepted: a candidate competes with every one that could
+            # displace it.
+            if inter > (1.0 - KEEP_SHARE) * min(len(sets[i]), len(sets[j])):
                 group.append(j)
         best = group[0]
         for j in group[1:]:
@@ -340,7 +348,7 @@ def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candi
                 done[j] = True
         c = cands[best]
         avail = c.indices[free[c.indices]]
-        if len(avail) < max(ctx.min_points, 0.6 * len(c.indices)):
+        if len(avail) < max(ctx.min_points, KEEP_SHARE * len(c.indices)):
             continue
         c = replace(c, indices=avail)
         free[avail] = False
