@@ -316,3 +316,18 @@ def gauss_newton(fun, x0: np.ndarray, iters: int = 8, tol: float = 1e-12) -> np.
         else:
             lam *= 10
     return x
+
+
+def frame_turn_rows(frame, x: np.ndarray, v: np.ndarray, tilt: tuple[int, ...], h: float = 1e-7) -> np.ndarray:
+    """Rows (3, k, m) of the derivatives of v @ f for each vector f of the
+    frame ``frame(x)`` (a tuple of 3-vectors) with respect to the k
+    parameters x; only the ``tilt`` columns turn the frame (finite
+    differences on 3-vectors, cheap), the others are zero. ``v`` (m, 3)."""
+    base = frame(x)
+    out = np.zeros((len(base), len(x), len(v)))
+    for j in tilt:
+        xe = x.copy()
+        xe[j] += h
+        for i, (fe, f0) in enumerate(zip(frame(xe), base)):
+            out[i, j] = v @ ((fe - f0) / h)
+    return out

@@ -24,8 +24,8 @@ from scipy.spatial.transform import Rotation
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register,
-                   regular_indices, tangent_basis, unit)
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, frame_turn_rows, radial,
+                   register, regular_indices, tangent_basis, unit)
 
 #: Relative spread (max − min) / max of the semi-axes below which the shape is a sphere.
 SPHERE_TOL = 0.05
@@ -246,13 +246,14 @@ class Ellipsoid(Family):
         return SPHERE_TOL < (e.max() - e.min()) / e.max() and e.min() > 0.05 * e.max()
 
     def fit(self, prim, P, N):
-        # Each residual is an iterative foot-point solve and the Jacobian is
-        # numerical: a regular subsample keeps a fit to tens of milliseconds.
+        # Each residual is an iterative foot-point solve: a regular subsample
+        # keeps a fit to milliseconds.
         P = P[regular_indices(len(P), 300)]
         c0 = np.asarray(prim.params["center"], float)
         V0 = np.asarray(prim.params["axes"], float)
         e0 = np.asarray(prim.params["semi_axes"], float)
-        if prim.params.get("kind") == "revolution":
+        revolution = prim.params.get("kind") == "revolution"
+        if revolution:
             k = distinguished_axis(e0)
             a0 = V0[k]
             t1, t2 = tangent_basis(a0)
@@ -264,22 +265,50 @@ class Ellipsoid(Family):
                 return c0 + x[:3], R, np.array([abs(x[5]), abs(x[5]), abs(x[6])])
 
             x0 = np.r_[0, 0, 0, 0, 0, p0, q0]
+            turn = (3, 4)
         else:
             def unpack(x):
                 R = Rotation.from_rotvec(x[3:6]).as_matrix() @ V0.T
                 return c0 + x[:3], R.T, np.abs(x[6:9])
 
             x0 = np.r_[0, 0, 0, 0, 0, 0, e0]
+            turn = (3, 4, 5)
+
+        state: dict = {}
 
         def res(x):
             c, V, e = unpack(x)
+            e = np.maximum(e, 1e-9)
             Y = (P - c) @ V.T
-            foot, d = ellipsoid_foot(Y, np.maximum(e, 1e-9))
-            inside = np.sum((Y / np.maximum(e, 1e-9)) ** 2, axis=1) < 1
+            foot, d = ellipsoid_foot(Y, e)
+            inside = np.sum((Y / e) ** 2, axis=1) < 1
+            state.update(x=x.copy(), c=c, e=e, foot=foot)
             return np.where(inside, -d, d)
 
+        def jac(x):
+            # The signed distance's gradient is the unit normal at the foot
+            # (in Y) and −(f_k²/e_k³)/|f/e²| in e_k; only the frame's turn is
+            # differenced (on 3-vectors). A numerical Jacobian costs a foot
+            # solve per parameter.
+            if "x" not in state or not np.array_equal(state["x"], x):
+                res(x)
+            c, e, foot = state["c"], state["e"], state["foot"]
+            grad = foot / e**2
+            gn = np.maximum(np.linalg.norm(grad, axis=1), 1e-300)
+            n = grad / gn[:, None]
+            dY = frame_turn_rows(lambda z: tuple(unpack(z)[1]), x, P - c, turn)  # (3, k, m)
+            J = np.einsum("mi,ikm->mk", n, dY)
+            J[:, :3] = -(n @ unpack(x)[1])
+            de = -(foot**2 / e**3) / gn[:, None]
+            if revolution:
+                J[:, 5] = (de[:, 0] + de[:, 1]) * np.sign(x[5])
+                J[:, 6] = de[:, 2] * np.sign(x[6])
+            else:
+                J[:, 6:9] = de * np.sign(x[6:9])
+            return np.where(np.isfinite(J), J, 0.0)
+
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=8 * len(x0))
+            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=8)
         except Exception:
             return None
         c, V, e = unpack(sol.x)

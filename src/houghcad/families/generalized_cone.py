@@ -20,9 +20,9 @@ from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from ..preprocess import rotation_to_z
-from .base import Frame, Family, Primitive, planes_intersection, register, unit
+from .base import Frame, Family, Primitive, frame_turn_rows, planes_intersection, register, unit
 from .generalized_cylinder import (B_MAX, B_MIN, N_VALUES, DirectrixPlacement, active_order, best_order, debias_b,
-                                   frame_turn_rows, normalise_shape, phase_frame, polar_fit, polar_local,
+                                   normalise_shape, phase_frame, polar_fit, polar_local,
                                    polar_rows, ref_basis, vote_grid)
 
 

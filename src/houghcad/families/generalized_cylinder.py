@@ -21,7 +21,8 @@ from scipy.spatial import cKDTree
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import Frame, Family, Placement, Primitive, register, regular_indices, tangent_basis, unit
+from .base import (Frame, Family, Placement, Primitive, frame_turn_rows, register, regular_indices,
+                   tangent_basis, unit)
 from .cylinder import axis_candidates
 
 #: Orders of the directrix that are swept.
@@ -225,21 +226,6 @@ def ref_basis(axis: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray
         e1 = tangent_basis(a)[0]
     e1 = unit(e1)
     return e1, np.cross(a, e1), a
-
-
-def frame_turn_rows(frame, x: np.ndarray, v: np.ndarray, tilt: tuple[int, ...], h: float = 1e-7) -> np.ndarray:
-    """Rows (3, k, m) of the derivatives of v @ f for each vector f of the
-    frame ``frame(x)`` (a tuple of 3-vectors) with respect to the k
-    parameters x; only the ``tilt`` columns turn the frame (finite
-    differences on 3-vectors, cheap), the others are zero. ``v`` (m, 3)."""
-    base = frame(x)
-    out = np.zeros((len(base), len(x), len(v)))
-    for j in tilt:
-        xe = x.copy()
-        xe[j] += h
-        for i, (fe, f0) in enumerate(zip(frame(xe), base)):
-            out[i, j] = v @ ((fe - f0) / h)
-    return out
 
 
 def polar_rows(X: np.ndarray, Y: np.ndarray, rho: np.ndarray, cn: np.ndarray, sn: np.ndarray, b: float,
