@@ -400,9 +400,9 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
         for j in np.unique(pairs[:, 0]):
             cand = pairs[pairs[:, 0] == j, 1]
             s = segments[j]
-            sd = s.family.signed_distance(s.prim, P[cand])
-            d, claim = surface_distance(s, P[cand], sd)
             sn = s.family.surface_normals(s.prim, P[cand])
+            sd = s.family.signed_distance(s.prim, P[cand], sn)
+            d, claim = surface_distance(s, P[cand], sd)
             a = owner[cand]
             # Where the point lies against the two faces' sides of each
             # other (see _sides): a point that only j's face could have
@@ -493,11 +493,11 @@ def _sides(segments: list[Candidate], pairs: np.ndarray, ctx: Context) -> np.nda
                 continue
             # Tangent there (a plane and the wide cylinder beside it on one
             # noisy face): no edge, and the nearer surface decides.
-            cos = np.abs(np.einsum("ij,ij->i", segments[x].family.surface_normals(segments[x].prim, Q),
-                                   segments[y].family.surface_normals(segments[y].prim, Q)))
+            ny = segments[y].family.surface_normals(segments[y].prim, Q)
+            cos = np.abs(np.einsum("ij,ij->i", segments[x].family.surface_normals(segments[x].prim, Q), ny))
             if np.median(cos) >= ctx.cos_angle:
                 continue
-            sd = segments[y].family.signed_distance(segments[y].prim, Q)
+            sd = segments[y].family.signed_distance(segments[y].prim, Q, ny)
             sd = sd[np.abs(sd) >= ctx.tau]
             if len(sd) >= ctx.min_points:
                 f = float(np.mean(sd > 0))

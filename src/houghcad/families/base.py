@@ -133,13 +133,14 @@ class Family:
         """Unit surface normal at the foot of each point (n, 3)."""
         raise NotImplementedError
 
-    def signed_distance(self, prim: Primitive, P: np.ndarray) -> np.ndarray:
+    def signed_distance(self, prim: Primitive, P: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
         """Distance (n,) signed by the side of the surface the points lie on:
-        positive along :meth:`surface_normals`. Generic: the foot is the
-        point moved back along its normal by its distance; a family with a
-        closed form may override it."""
+        positive along :meth:`surface_normals` (pass them as ``normals``
+        (n, 3) when the caller has them). Generic: the foot is the point
+        moved back along its normal by its distance; a family with a closed
+        form may override it."""
         d = self.distance(prim, P)
-        n = self.surface_normals(prim, P)
+        n = self.surface_normals(prim, P) if normals is None else normals
         back = self.distance(prim, P - d[:, None] * n)
         ahead = self.distance(prim, P + d[:, None] * n)
         return np.where(back <= ahead, d, -d)

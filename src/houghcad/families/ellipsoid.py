@@ -282,7 +282,7 @@ class Ellipsoid(Family):
             Y = (P - c) @ V.T
             foot, d = ellipsoid_foot(Y, e)
             inside = np.sum((Y / e) ** 2, axis=1) < 1
-            state.update(x=x.copy(), c=c, e=e, foot=foot)
+            state.update(x=x.copy(), c=c, V=V, e=e, foot=foot)
             return np.where(inside, -d, d)
 
         def jac(x):
@@ -292,13 +292,13 @@ class Ellipsoid(Family):
             # solve per parameter.
             if "x" not in state or not np.array_equal(state["x"], x):
                 res(x)
-            c, e, foot = state["c"], state["e"], state["foot"]
+            c, V, e, foot = state["c"], state["V"], state["e"], state["foot"]
             grad = foot / e**2
             gn = np.maximum(np.linalg.norm(grad, axis=1), 1e-300)
             n = grad / gn[:, None]
             dY = frame_turn_rows(lambda z: tuple(unpack(z)[1]), x, P - c, turn)  # (3, k, m)
             J = np.einsum("mi,ikm->mk", n, dY)
-            J[:, :3] = -(n @ unpack(x)[1])
+            J[:, :3] = -(n @ V)
             de = -(foot**2 / e**3) / gn[:, None]
             if revolution:
                 J[:, 5] = (de[:, 0] + de[:, 1]) * np.sign(x[5])
