@@ -15,7 +15,7 @@ from houghcad import synth
 from houghcad.associate import Associator, extent
 from houghcad.families import REGISTRY, Primitive
 from houghcad.preprocess import preprocess
-from houghcad.recognize import Candidate
+from houghcad.state import Candidate
 
 RNG = np.random.default_rng(7)
 

@@ -115,7 +115,7 @@ def noisy_blocks():
 def test_noisy_boss_fillet_is_recognised(noisy_blocks):
     # The boss's concave torus fillet (minor radius 5-6 σ) sags at most 1.5-1.8 σ off the
     # top face and the boss: inside both inlier bands, it used to go to them (DSC 0.11-0.15).
-    # Its boundaries are drawn by the rounded corner (split.surface_distance): nearest
+    # Its boundaries are drawn by the rounded corner (boundaries.surface_distance): nearest
     # unbounded surfaces handed a third of it back to its faces (DSC 0.60-0.64, edge
     # fillet 0.63-0.70; now 0.88-0.92 and 0.93-0.94).
     for cloud, res in noisy_blocks:

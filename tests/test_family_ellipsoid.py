@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 from houghcad import segment, synth
 from houghcad.families import REGISTRY, Primitive
 from houghcad.families.ellipsoid import SPHERE_TOL, ellipsoid_foot, quadric_fit
-from houghcad.recognize import Context
+from houghcad.context import Context
 
 
 def _largest(result, type_: str):

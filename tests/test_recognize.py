@@ -13,7 +13,8 @@ from houghcad.families import REGISTRY, select as select_families
 from houghcad.pipeline import Segmenter
 from houghcad.preprocess import preprocess
 from houghcad.evaluate import parameter_errors
-from houghcad.recognize import Candidate, _noise_floored, mean_fitting_error, recognize, select
+from houghcad.recognize import _noise_floored, recognize, select
+from houghcad.state import Candidate, mean_fitting_error
 
 
 def _context(points):

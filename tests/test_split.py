@@ -12,7 +12,9 @@ import houghcad
 from houghcad import synth
 from houghcad.pipeline import Segmenter
 from houghcad.preprocess import preprocess
-from houghcad.split import dissolve_redundant, ransac_pieces, seed_cgal_random, settle_edges
+from houghcad.boundaries import dissolve_redundant, settle_edges
+from houghcad.cgal_random import seed_cgal_random
+from houghcad.ransac import ransac_pieces
 
 
 def _context(points, seed=0):
@@ -86,7 +88,7 @@ def _carved(family, seed, n_points=3000):
     simple families leaves it."""
     from houghcad.families import REGISTRY
     from houghcad.recognize import recognize
-    from houghcad.split import accept
+    from houghcad.growth import accept
 
     cloud = synth.single(family, seed=seed, n_points=n_points)
     ctx = _context(cloud.points)
@@ -103,7 +105,7 @@ def _carved(family, seed, n_points=3000):
 
 def test_consolidate_lets_a_complex_family_retake_its_carved_surface():
     from houghcad.families import select
-    from houghcad.split import consolidate
+    from houghcad.consolidation import consolidate
 
     cloud, ctx, free, segments = _carved("generalized_cylinder", seed=1)
     assert len(segments) >= 3 and all(s.family.name in ("cylinder", "plane") for s in segments)
@@ -208,8 +210,8 @@ def test_noisy_coverage_is_judged_over_all_the_points_not_the_inliers():
     # is within the old bound of the face's own (12 % above it over all the
     # points): the test over all the points rejects it.
     from houghcad.families import REGISTRY
-    from houghcad.recognize import Candidate
-    from houghcad.split import _covered
+    from houghcad.state import Candidate
+    from houghcad.consolidation import _covered
 
     cloud = synth.single("plane", 0, n_points=3000, noise=0.01)
     ctx = _context(cloud.points)
@@ -238,7 +240,7 @@ def _seed_plane(P):
 def _plane_segment(ctx, idx):
     from houghcad.families import REGISTRY
     from houghcad.families.base import Primitive
-    from houghcad.recognize import Candidate, mean_fitting_error
+    from houghcad.state import Candidate, mean_fitting_error
 
     fam = REGISTRY["plane"]
     P = ctx.pre.points[idx]
@@ -251,7 +253,7 @@ def _plane_segment(ctx, idx):
 
 def test_noisy_segment_fitted_worse_than_the_noise_goes_to_its_own_surface():
     from houghcad.families import select
-    from houghcad.split import revisit_poor_fits
+    from houghcad.consolidation import revisit_poor_fits
 
     # A plane across a noisy helical strip (as the whole-cloud round leaves one beside a thread).
     cloud = synth.single("helical_strip", 0, n_points=3000, noise=0.005)
@@ -299,7 +301,7 @@ def test_noisy_segment_fitted_worse_than_the_noise_goes_to_its_own_surface():
 def test_noisy_edge_band_goes_back_to_the_face_it_lies_nearest():
     # Two noisy faces of a block meeting at an edge; the smaller one has
     # grown a band ε wide into the larger, as acceptance and growth leave it.
-    from houghcad.split import settle_noisy_edges
+    from houghcad.boundaries import settle_noisy_edges
 
     cloud = synth.PARTS["block_with_hole_and_slot"](seed=0, n_points=12000, noise=0.005)
     ctx = _context(cloud.points)
@@ -331,7 +333,7 @@ def test_noisy_points_beyond_a_convex_edge_stay_with_the_face_that_reaches_there
     # on the far side of one face's plane from the other face, is that other
     # face's: the first does not reach there. Over three seeds the side rule
     # leaves 75 of the nearest rule's 102 wrong points (it moved none before).
-    from houghcad.split import settle_noisy_edges
+    from houghcad.boundaries import settle_noisy_edges
 
     wrong, wrong_nearest = 0, 0
     for seed in range(3):
@@ -355,8 +357,8 @@ def test_noisy_points_beyond_a_convex_edge_stay_with_the_face_that_reaches_there
 def test_sides_of_two_faces_at_an_edge_and_of_a_plane_and_a_wide_cylinder():
     from houghcad.families import REGISTRY
     from houghcad.families.base import Primitive
-    from houghcad.recognize import Candidate
-    from houghcad.split import _sides
+    from houghcad.state import Candidate
+    from houghcad.boundaries import _sides
 
     cloud = synth.PARTS["block_with_hole_and_slot"](seed=0, n_points=12000, noise=0.005)
     ctx = _context(cloud.points)
@@ -401,8 +403,8 @@ def test_noisy_plane_takes_back_the_wide_cylinder_on_its_face():
     # Noise lets a cylinder of radius ~50 diagonals take part of a plane face
     # beside the plane's own segment; the plane covers it and takes it back.
     from houghcad.families import REGISTRY
-    from houghcad.recognize import Candidate
-    from houghcad.split import merge_complex
+    from houghcad.state import Candidate
+    from houghcad.consolidation import merge_complex
 
     cloud = synth.single("plane", 0, n_points=3000, noise=0.005)
     ctx = _context(cloud.points)
@@ -438,8 +440,8 @@ def test_noisy_dome_read_as_planes_is_voted_whole_again():
 def test_noisy_curved_segment_that_a_plane_fits_as_well_becomes_a_plane():
     from houghcad.families import REGISTRY, select
     from houghcad.families.base import Primitive
-    from houghcad.recognize import Candidate
-    from houghcad.split import prefer_planes
+    from houghcad.state import Candidate
+    from houghcad.consolidation import prefer_planes
 
     # A cylinder of radius 50 diagonals on a noisy plane face: flat within the noise.
     cloud = synth.single("plane", 0, n_points=3000, noise=0.005)

@@ -39,7 +39,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .families.base import Family, Frame, Primitive, regular_indices, unit
-from .recognize import Candidate
+from .state import Candidate
 
 __all__ = ["Associator", "Item", "RawGroup", "extent", "pivot"]
 

@@ -39,8 +39,8 @@ from scipy.spatial import cKDTree
 
 from .families import Family
 from .families.base import Primitive, radial, unit
-from .recognize import Candidate, Context, mean_fitting_error
-from .split import owners
+from .context import Context
+from .state import Candidate, mean_fitting_error, owners
 
 #: Likelihood-ratio threshold: (SSE(sharp) − SSE(fillet)) / σ² must exceed it.
 #: Under an ideal sharp corner the statistic is half χ²(1) and half 0 (r ≥ 0

@@ -13,10 +13,14 @@ from .associate import Associator, Item, extent
 from .blend import find_fillets
 from .errors import InputError
 from .preprocess import preprocess
-from .recognize import Candidate, Context, mean_fitting_error, recognize, refine
+from .boundaries import dissolve_redundant, settle_edges, settle_noisy_edges
+from .consolidation import consolidate, prefer_planes, revisit_poor_fits
+from .context import Context
+from .growth import absorb, accept
+from .recognize import recognize, refine
 from .result import GROUP_KINDS, Group, Part, Result, Segment
-from .split import absorb, accept, consolidate, dissolve_redundant, prefer_planes, revisit_poor_fits, \
-    settle_edges, settle_noisy_edges, splitting_phase
+from .splitting import splitting_phase
+from .state import Candidate, mean_fitting_error
 
 
 class Segmenter:

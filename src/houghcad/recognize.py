@@ -10,98 +10,23 @@ the simpler family).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial import cKDTree
 from sklearn.cluster import DBSCAN
 
+from .context import Context
 from .families import Family, Primitive
 from .hough import accumulate, persistent_peaks, smooth
-from .preprocess import Preprocessed
+from .state import Candidate, mean_fitting_error
 
 
 #: Peaks evaluated per placement for a complex (non-simple) family.
 COMPLEX_MAX_PEAKS = 6
+
 #: Peaks a stacked family adds from the votes off its top peak's surface (see :func:`_beside_top`).
 BESIDE_TOP_PEAKS = 2
-
-
-@dataclass
-class Context:
-    """Thresholds and data shared by a run (standard-frame units).
-
-    Attributes
-    ----------
-    pre : Preprocessed
-    tau : float
-        Inlier distance for candidate evaluation.
-    epsilon : float
-        Removal distance around accepted primitives (paper: 1–3% of the diagonal).
-    angle : float
-        Normal compatibility tolerance (radians).
-    link : float
-        Neighbour distance that makes a subset connected (dense).
-    cell : float
-        Accumulator resolution for lengths.
-    min_points : int
-        Smallest segment.
-    persistence : float
-        Peak persistence threshold, fraction of max H.
-    """
-
-    pre: Preprocessed
-    tau: float
-    epsilon: float
-    angle: float
-    link: float
-    cell: float
-    min_points: int
-    persistence: float = 0.1
-    max_peaks: int = 24
-    max_directions: int = 12
-    max_radius: float = 2.0
-    min_votes: float = 10.0
-    seed: int = 0
-    local: bool = False
-    neighbors: np.ndarray | None = None
-
-    @property
-    def spacing(self) -> float:
-        return self.pre.spacing
-
-    @property
-    def noisy(self) -> bool:
-        """Noise of at least 0.15 spacings: the points scatter about their
-        surface instead of lying on it (the 188 Fit4CAD training samples
-        read at most 0.09, 99 % of them under 0.04)."""
-        return self.pre.noise >= 0.15 * self.pre.spacing
-
-    @property
-    def cos_angle(self) -> float:
-        return float(np.cos(self.angle))
-
-
-@dataclass
-class Candidate:
-    """A primitive with a dense subset X_i of the points it explains.
-
-    ``indices`` index the whole cloud; ``mfe`` follows eq. (1) in the
-    standard frame.
-    """
-
-    family: Family
-    prim: Primitive
-    indices: np.ndarray
-    mfe: float
-    extra: dict = field(default_factory=dict)
-
-
-def mean_fitting_error(dist: np.ndarray, P: np.ndarray) -> float:
-    """Eq. (1): mean distance / diagonal of the axis-aligned bounding box of P (n, 3)."""
-    diag = float(np.linalg.norm(np.ptp(P, axis=0)))
-    return float(dist.mean() / diag) if diag > 0 else float("inf")
-
 
 def dense_subsets(P: np.ndarray, link: float, min_points: int) -> list[np.ndarray]:
     """Connected dense subsets of P (n, 3): DBSCAN components of at least min_points."""
@@ -120,7 +45,6 @@ def dense_subsets(P: np.ndarray, link: float, min_points: int) -> list[np.ndarra
         out.append(np.sort(order[lo:hi]))
     return out
 
-
 def inliers(fam: Family, prim: Primitive, P: np.ndarray, N: np.ndarray, tau: float, cos_angle: float):
     """Boolean mask of the points within ``tau`` with a compatible normal, and the distances."""
     d = fam.distance(prim, P)
@@ -131,10 +55,8 @@ def inliers(fam: Family, prim: Primitive, P: np.ndarray, N: np.ndarray, tau: flo
         ok[near] = np.abs(np.einsum("ij,ij->i", sn, N[near])) >= cos_angle
     return ok, d
 
-
 def _subsample(n: int, m: int, rng: np.random.Generator) -> np.ndarray:
     return np.arange(n) if n <= m else np.sort(rng.choice(n, m, replace=False))
-
 
 def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse: float) -> list[Candidate]:
     """Candidate evaluation on the point set ``idx`` (global indices).
@@ -211,7 +133,6 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
         out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X), {"d": d[loc]}))
     return out
 
-
 def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive, float]]:
     """Peaks of the family's accumulators on the point set ``idx``: coarse
     primitives with the tolerance their cell size allows."""
@@ -243,7 +164,6 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
                 out.append((prim, fam.coarse_tolerance(grid, Pl, ctx)))
     return out
 
-
 def _beside_top(fam: Family, pl, grid, H: np.ndarray, pk: np.ndarray, P: np.ndarray, Pl: np.ndarray,
                 voter: np.ndarray, vals: np.ndarray, ctx: Context) -> np.ndarray:
     """Flat indices (k,) of the local maxima of the accumulator ``H`` whose
@@ -270,7 +190,6 @@ def _beside_top(fam: Family, pl, grid, H: np.ndarray, pk: np.ndarray, P: np.ndar
         return none
     again, _ = persistent_peaks(H2, ctx.persistence * top / H2.max(), grid.wrap)
     return again[np.isin(again, near) & (H2.ravel()[again] >= ctx.min_votes)]
-
 
 def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     """Point-wise competition: a point stays with a candidate only if no other
@@ -302,10 +221,8 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
                                  mean_fitting_error(dd[comp], ctx.pre.points[idx[comp]]), {"d": dd[comp]}))
     return out
 
-
 #: Share of its points a selected candidate must still hold free to be accepted.
 KEEP_SHARE = 0.6
-
 
 def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candidate]:
     """Greedy choice among competing candidates.
@@ -355,7 +272,6 @@ def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candi
         accepted.append(c)
     return accepted
 
-
 def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     """The candidates as selection compares them: on a noisy cloud, by their
     mean distance in excess of the noise's own.
@@ -386,7 +302,6 @@ def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
         out.append(replace(c, mfe=c.mfe * max(m - floor, least) / m))
     return out
 
-
 def _better(a: Candidate, b: Candidate) -> bool:
     """Whether candidate a should replace b for the same points."""
     ca, cb = a.family.complexity, b.family.complexity
@@ -406,7 +321,6 @@ def _better(a: Candidate, b: Candidate) -> bool:
         len(cplx.indices) >= 1.5 * len(simple.indices) and cplx.mfe <= 1.25 * simple.mfe)
     return (a is cplx) == cplx_wins
 
-
 def recognize(idx: np.ndarray, families: list[Family], ctx: Context, free: np.ndarray) -> list[Candidate]:
     """One recognition step on the points ``idx`` (global indices).
 
@@ -414,7 +328,6 @@ def recognize(idx: np.ndarray, families: list[Family], ctx: Context, free: np.nd
     ``free`` (the caller removes them).
     """
     return select(candidates(idx, families, ctx, free), free, ctx)
-
 
 def candidates(idx: np.ndarray, families: list[Family], ctx: Context, free: np.ndarray) -> list[Candidate]:
     """Every family's evaluated candidates on the free points of ``idx``
@@ -436,7 +349,6 @@ def candidates(idx: np.ndarray, families: list[Family], ctx: Context, free: np.n
         for prim, coarse in propose(fam, idx, ctx):
             cands.extend(evaluate(fam, prim, idx, ctx, coarse))
     return cands
-
 
 def refine(segments: list[Candidate], families: list[Family], ctx: Context) -> None:
     """Offer every segment to the selected families that refine its family

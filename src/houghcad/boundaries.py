@@ -1,0 +1,260 @@
+"""Boundaries between adjacent segments (extensions): edge points settled
+between the faces that explain them, and slivers dissolved into their
+neighbours."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .context import Context
+from .state import Candidate, owners
+
+
+def surface_distance(s: Candidate, P: np.ndarray, signed: np.ndarray | None = None) \
+        -> tuple[np.ndarray, np.ndarray | None]:
+    """Distance (m,) of points P (m, 3) to segment s's surface, and which of
+    them s claims outright (bool (m,)) or None. ``signed``: the points'
+    signed distances to s's primitive when the caller has them already.
+
+    A fillet found by :mod:`houghcad.blend` (``extra["arc"]``) is bounded to
+    its arc: the points its rounded corner puts on its faces are at infinity
+    from it, and those it puts on the arc are its own, whatever the faces'
+    unbounded surfaces say there.
+    """
+    arc = s.extra.get("arc")
+    if arc is not None:
+        return arc.distance(P)
+    return (s.family.distance(s.prim, P) if signed is None else np.abs(signed)), None
+
+def _neighbour_owners(owner: np.ndarray, pts: np.ndarray, ctx: Context, reach: float,
+                      k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k nearest neighbours (m, k) of the points ``pts`` within ``reach``
+    (missing ones as index 0) and their segments in ``owner`` (-1: none)."""
+    P = ctx.pre.points
+    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
+    ok = np.isfinite(dist)
+    nb = np.where(ok, nb, 0)
+    return nb, np.where(ok, owner[nb], -1)
+
+def _reassign(segments: list[Candidate], owner: np.ndarray, best: np.ndarray, min_points: int) -> bool:
+    """Move, in place, each point from segment ``owner`` to segment ``best``
+    (both (n,), -1: none), except that a segment keeps at least min_points of
+    its own. Returns whether any point moved."""
+    moved = best != owner
+    left = np.bincount(owner[(owner >= 0) & ~moved], minlength=len(segments))
+    short = moved & (owner >= 0)
+    short[short] = left[owner[short]] < min_points
+    best = np.where(short, owner, best)
+    moved &= ~short
+    if not moved.any():
+        return False
+    for j, s in enumerate(segments):
+        keep = s.indices[best[s.indices] == j]
+        add = np.flatnonzero(moved & (best == j))
+        if len(add) or len(keep) < len(s.indices):
+            segments[j] = replace(s, indices=np.union1d(keep, add))
+    return True
+
+def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: float, k: int = 12) -> None:
+    """Give the points that lie on two adjacent segments' surfaces to the smaller one,
+    and unsegmented points that lie on an adjacent segment's surface to it.
+
+    CAD samples include the faces' boundary curves, which lie on both faces;
+    whoever was accepted first took them. To a narrow face (a fillet, a
+    chamfer, a hole) those rows are a large share of its points, to a wide
+    one a negligible share. ``delta``: distance to a surface that counts as
+    on it (standard units).
+    """
+    if len(segments) < 2:
+        return
+    P = ctx.pre.points
+    owner = owners(segments, len(P))
+    sizes = np.array([len(s.indices) for s in segments])
+    best = owner.copy()
+    best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
+    pts = np.arange(len(P))
+    _, other = _neighbour_owners(owner, pts, ctx, reach, k)
+    # Pairs (point, adjacent smaller segment), each once; unsegmented points
+    # count as owned by an infinitely large segment.
+    mask = (other >= 0) & (other != owner[pts][:, None])
+    mask &= sizes[np.maximum(other, 0)] < best_size[pts][:, None]
+    if not mask.any():
+        return
+    pi = np.broadcast_to(pts[:, None], other.shape)[mask]
+    sj = other[mask]
+    pairs = np.unique(np.stack([sj, pi], axis=1), axis=0)
+    for j in np.unique(pairs[:, 0]):
+        cand = pairs[pairs[:, 0] == j, 1]
+        s = segments[j]
+        cand = cand[s.family.distance(s.prim, P[cand]) < delta]
+        cand = cand[sizes[j] < best_size[cand]]
+        best[cand] = j
+        best_size[cand] = sizes[j]
+    _reassign(segments, owner, best, ctx.min_points)
+
+def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k: int = 12,
+                       rounds: int = 8) -> None:
+    """Noisy clouds: give each point near a boundary to the adjacent segment
+    whose surface is nearest, in place.
+
+    Scattered points near an edge lie within the inlier distance of both
+    faces; whoever was accepted or grown first took a band up to ε wide of its
+    neighbour's points. The nearest surface (among the point's own segment and
+    the segments of its neighbours within ``reach``, with the estimated normal
+    within the angle tolerance of that surface's) is the likelier face, except
+    where a point lies where only one of two faces meeting at an edge reaches
+    (see :func:`_sides`) and near a fillet found by :mod:`houghcad.blend`,
+    whose rounded corner draws its boundaries (see :func:`surface_distance`).
+    Each round moves the points next to the current boundary, so the boundary
+    walks to where the surfaces cross; a segment keeps at least min_points.
+    """
+    if len(segments) < 2:
+        return
+    P, N = ctx.pre.points, ctx.pre.normals
+    side = None
+    for _ in range(rounds):
+        owner = owners(segments, len(P))
+        pts = np.flatnonzero(owner >= 0)
+        _, other = _neighbour_owners(owner, pts, ctx, reach, k)
+        mask = (other >= 0) & (other != owner[pts][:, None])
+        if not mask.any():
+            return
+        pairs = np.unique(np.stack([other[mask], np.broadcast_to(pts[:, None], other.shape)[mask]], 1), axis=0)
+        if side is None:
+            side = _sides(segments, np.unique(np.stack([owner[pairs[:, 1]], pairs[:, 0]], 1), axis=0), ctx)
+        edge = np.unique(pairs[:, 1])
+        best = owner.copy()
+        best_d = np.full(len(P), np.inf)
+        own_s = np.zeros(len(P))
+        held = np.zeros(len(P), bool)  # claimed by a fillet's arc (see surface_distance)
+        for j in np.unique(owner[edge]):
+            e = edge[owner[edge] == j]
+            own_s[e] = segments[j].family.signed_distance(segments[j].prim, P[e])
+            best_d[e], claim = surface_distance(segments[j], P[e], own_s[e])
+            if claim is not None:
+                held[e[claim & (best_d[e] < ctx.tau)]] = True
+        for j in np.unique(pairs[:, 0]):
+            cand = pairs[pairs[:, 0] == j, 1]
+            s = segments[j]
+            sn = s.family.surface_normals(s.prim, P[cand])
+            sd = s.family.signed_distance(s.prim, P[cand], sn)
+            d, claim = surface_distance(s, P[cand], sd)
+            a = owner[cand]
+            # Where the point lies against the two faces' sides of each
+            # other (see _sides): a point that only j's face could have
+            # produced goes to j, one that only its owner's could stays.
+            mine = own_s[cand] * side[j, a] >= 0
+            theirs = sd * side[a, j] >= 0
+            # (The estimated normals blur across an edge: they judge only
+            # the points either face could have produced.)
+            near = (d < best_d[cand]) & (np.abs(np.einsum("ij,ij->i", sn, N[cand])) >= ctx.cos_angle)
+            ok = np.where(mine & ~theirs, d < ctx.tau, np.where(theirs & ~mine, False, near)) & ~held[cand]
+            if claim is not None:
+                ok |= claim & (d < ctx.tau) & ~held[cand]
+                held[cand[ok]] = True
+            best[cand[ok]] = j
+            best_d[cand[ok]] = d[ok]
+        if not _reassign(segments, owner, best, ctx.min_points):
+            return
+
+def _sides(segments: list[Candidate], pairs: np.ndarray, ctx: Context) -> np.ndarray:
+    """side[a, b]: the side of b's surface (+1 along its normals, -1, 0
+    unclear) on which a's points lie near their contact, for the segment
+    pairs (m, 2); an (n, n) int8 array, 0 elsewhere.
+
+    Two faces meeting at an edge each stop at the other: face a lies on one
+    side of b's surface. A noisy point beyond a convex edge, on the far side
+    of b from a's face, is a's only if its foot on b would fall outside b's
+    face, where b has no points; a nearest-surface rule gives it to b
+    whenever b's surface is nearer. The side is read on a's points within
+    3 links of b's that lie clearly off b's surface (beyond tau), by a
+    majority of 80 %; both faces' sides must be clear.
+    """
+    n = len(segments)
+    P = ctx.pre.points
+    side = np.zeros((n, n), np.int8)
+    # A wrong primitive (a cylinder across a wall and its two corners) fits
+    # clearly worse than the part's faces do, and its sides would spread
+    # the error: it keeps the nearer-surface rule.
+    fit = np.array([s.family.distance(s.prim, P[s.indices]).mean() for s in segments])
+    sound = fit <= 1.5 * np.median(fit)
+    trees: dict[int, cKDTree] = {}
+    for a, b in {(int(min(u, v)), int(max(u, v))) for u, v in pairs.tolist() if u != v}:
+        if not (sound[a] and sound[b]):
+            continue
+        for x, y in ((a, b), (b, a)):
+            if y not in trees:
+                trees[y] = cKDTree(P[segments[y].indices])
+            Q = P[segments[x].indices]
+            Q = Q[np.isfinite(trees[y].query(Q, distance_upper_bound=3 * ctx.link)[0])]
+            if len(Q) < ctx.min_points:
+                continue
+            # Tangent there (a plane and the wide cylinder beside it on one
+            # noisy face): no edge, and the nearer surface decides.
+            ny = segments[y].family.surface_normals(segments[y].prim, Q)
+            cos = np.abs(np.einsum("ij,ij->i", segments[x].family.surface_normals(segments[x].prim, Q), ny))
+            if np.median(cos) >= ctx.cos_angle:
+                continue
+            sd = segments[y].family.signed_distance(segments[y].prim, Q, ny)
+            sd = sd[np.abs(sd) >= ctx.tau]
+            if len(sd) >= ctx.min_points:
+                f = float(np.mean(sd > 0))
+                side[x, y] = 1 if f >= 0.8 else -1 if f <= 0.2 else 0
+        # An edge has each face on one side of the other; a face that
+        # crosses the other (a T-junction) or straddles it (a wrong
+        # primitive cutting through a face) leaves the pair to nearness.
+        if side[a, b] == 0 or side[b, a] == 0:
+            side[a, b] = side[b, a] = 0
+    return side
+
+def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, reach: float,
+                       k: int = 12) -> None:
+    """Dissolve, in place, the small segments that their neighbours explain better.
+
+    A sliver along an edge (points whose blurred normals kept them out of
+    both faces) gets its own primitive in the splitting phase, fitted worse
+    than the faces fit the same points. A segment smaller than ``3 *
+    min_points`` is dissolved when every point lies within ``delta`` of a
+    larger adjacent segment's surface (neighbours within ``reach``) and those
+    distances are on average below its own; each point goes to the nearest
+    such surface. A narrow true face (a fillet) fits its own points at least
+    as well and stays.
+    """
+    if len(segments) < 2:
+        return
+    P = ctx.pre.points
+    sizes = np.array([len(s.indices) for s in segments])
+    small = np.flatnonzero(sizes < 3 * ctx.min_points)
+    if len(small) == 0:
+        return
+    owner = owners(segments, len(P))
+    gone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for j in small[np.argsort(sizes[small], kind="stable")]:
+        s = segments[j]
+        idx = s.indices
+        _, nb = ctx.pre.tree.query(P[idx], k=min(k, len(P)), distance_upper_bound=reach)
+        nb = nb[nb < len(P)]
+        adj = np.unique(owner[nb])
+        adj = [int(a) for a in adj if a >= 0 and a != j and a not in gone and sizes[a] > sizes[j]]
+        if not adj:
+            continue
+        d = np.stack([segments[a].family.distance(segments[a].prim, P[idx]) for a in adj])
+        near = d.min(axis=0)
+        own = s.family.distance(s.prim, P[idx])
+        if not (near < delta).all() or near.mean() >= own.mean():
+            continue
+        gone[int(j)] = (idx, np.asarray(adj)[d.argmin(axis=0)])
+    if not gone:
+        return
+    add: dict[int, list[np.ndarray]] = {}
+    for idx, to in gone.values():
+        for a in np.unique(to):
+            add.setdefault(int(a), []).append(idx[to == a])
+    for a, parts in add.items():
+        s = segments[a]
+        segments[a] = replace(s, indices=np.union1d(s.indices, np.concatenate(parts)))
+    for j in sorted(gone, reverse=True):
+        del segments[j]

@@ -1,0 +1,394 @@
+"""Consolidation (extension): complex families retake surfaces that simpler
+ones carved into pieces, pieces of one surface are voted again together, and
+on noisy clouds poorly fitted segments are voted again alone."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .adjacency import smooth_adjacency
+from .context import Context
+from .families import Family
+from .families.base import Primitive
+from .growth import grow
+from .recognize import candidates, inliers, recognize
+from .state import Candidate, mean_fitting_error
+
+
+def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate]) -> None:
+    """Let complex families retake surfaces that simpler ones carved into pieces, in place.
+
+    The global round votes only the simple families on the whole cloud; on a
+    complex surface they find tangent slices (cylinders along the lobes of a
+    generalised cylinder, spheres and planes on a helical surface), each
+    within the inlier distance, before the per-cluster rounds can see the
+    whole surface. Each group of segments joined by tangent-continuous
+    boundaries is voted again by the complex families; a complex candidate
+    replaces the segments it explains when it covers at least two of them
+    (80 % of each one's points) and fits them no worse than they fit
+    themselves. Complex segments, and those of the families voted per
+    cluster, then take the adjacent pieces of their surface
+    (:func:`merge_complex`). On noisy clouds every family first votes again
+    on each segment fitted clearly worse than the noise
+    (:func:`revisit_poor_fits`).
+    """
+    if len(segments) < 2:
+        return
+    cplx = [f for f in families if not f.simple]
+    # Only noise lets simpler families slice a cone or torus in the
+    # whole-cloud round (on clean samples evaluate()'s gate rejects slices).
+    per_cluster = [f for f in families if f.simple and not f.global_search] if ctx.noisy else []
+    if ctx.noisy:
+        revisit_poor_fits(families, ctx, free, segments)
+    _revote_groups(cplx, per_cluster, ctx, free, segments)
+    merge_complex(segments, ctx, free)
+
+#: Share of a poorly fitted segment that a candidate must explain to replace it.
+DOMINANT = 0.6
+
+def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate],
+                      excess: float = 1.3) -> bool:
+    """On a noisy cloud, vote every family again on each segment whose
+    primitive fits it clearly worse than the noise, in place.
+
+    Such a segment was mostly taken in a round that saw other surfaces too: a
+    plane across a helical strip, a sphere across a generalised cylinder whose
+    own candidate there also held points of its neighbours. Alone, its
+    surface's family fits it to the noise.
+
+    Fits are compared by their cost over all the segment's points, each
+    distance capped at tau (MSAC: a stray point of a neighbouring face costs
+    every candidate the same), less the noise's own mean distance (0.8 σ).
+    Segments within ``excess`` times the noise's cost are left alone. Among
+    the candidates that explain most of the segment (a share of at least
+    ``DOMINANT`` of its points, 80 % of that share within tau, see
+    :func:`_covered`), a more complex family displaces a simpler one only by
+    halving that excess, as in selection; the choice replaces the segment
+    when, on its share, it halves the excess of the segment's own primitive
+    (its own family refitted, or a simpler one, need only lower it). The
+    rest of the segment, often a band of a neighbouring face that no one
+    primitive explains with it, is freed for its neighbours (:func:`absorb`).
+    Returns whether a segment was replaced.
+    """
+    P = ctx.pre.points
+    ref = 0.8 * ctx.pre.noise
+    least = 0.05 * ref  # excesses below this are the noise's own
+    lctx = replace(ctx, local=True)
+
+    def cost(c: Candidate, idx: np.ndarray) -> float:
+        return float(np.minimum(c.family.distance(c.prim, P[idx]), ctx.tau).mean()) - ref
+
+    replaced = False
+
+    for k in sorted(range(len(segments)), key=lambda i: -len(segments[i].indices)):
+        s = segments[k]
+        if len(s.indices) < 3 * ctx.min_points:
+            continue
+        own = cost(s, s.indices)
+        if own <= (excess - 1.0) * ref:
+            continue
+        avail = np.zeros(len(P), bool)
+        avail[s.indices] = True
+        cover = []
+        for c in candidates(s.indices, families, lctx, avail):
+            if len(c.indices) < DOMINANT * len(s.indices):
+                continue
+            # The candidate's share of the segment, compared there.
+            sub = replace(s, indices=c.indices)
+            got = _covered(c, [sub], ctx)
+            if got:
+                cover.append((max(cost(c, s.indices), least), c, got[0][1]))
+        best = None
+        for e, c, q in sorted(cover, key=lambda t: (t[1].family.complexity, t[0])):
+            if best is None or (e < 0.5 * best[0] if c.family.complexity > best[1].family.complexity else e < best[0]):
+                best = (e, c, q)
+        if best is None:
+            continue
+        e, c, q = best
+        # Against the segment's own primitive on the candidate's share only:
+        # the rest may be another surface, which no one primitive explains.
+        mine, theirs = max(cost(c, c.indices), least), max(cost(s, c.indices), least)
+        if mine >= (0.5 if c.family.complexity > s.family.complexity else 1.0) * theirs:
+            continue
+        free[s.indices] = True
+        new = _union(c, [q], P)
+        free[new.indices] = False
+        segments[k] = new
+        replaced = True
+    return replaced
+
+def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, free: np.ndarray,
+                   segments: list[Candidate]) -> None:
+    """The complex families' and the per-cluster simple families' vote on
+    each group of tangent-joined segments (see :func:`consolidate`).
+
+    A cone or torus is placed from all the normals of the whole cloud, which
+    suits one of them at most: a second cone of a part comes out in cylinder,
+    sphere and plane bands. Those families are voted on the group as on a
+    cluster (their placements from its normals).
+    """
+    if not cplx and not per_cluster:
+        return
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(segments)
+    P = ctx.pre.points
+    removed = np.zeros(n, bool)
+    added: list[Candidate] = []
+    joined = smooth_adjacency(segments, ctx)
+    votes = []
+    if cplx:
+        # Voted as a whole cloud (ctx.local False): the families' gates skip a
+        # group that is not one complex surface, which most groups of simple
+        # faces are not (a plane, a fillet and a plane).
+        votes.append((joined, cplx, ctx, False))
+        if ctx.noisy:
+            # Planes and spheres that slice a noisy curved surface meet at
+            # creases wider than a face's own normals wander: joined up to
+            # the normals' tolerance, they make the group again.
+            votes.append((smooth_adjacency(segments, ctx, crease=ctx.angle), cplx, ctx, False))
+    if per_cluster:
+        # The bands of a noisy cone fit to the noise each, and their fitted
+        # normals often disagree at their contacts: after the tangent-joined
+        # groups, any contact joins them, and so the faces of a whole part;
+        # the faces that dominate what remains are set aside in turn.
+        lctx = replace(ctx, local=True)
+        votes.append((joined, per_cluster, lctx, True))
+        votes.append((smooth_adjacency(segments, ctx, smooth=False), per_cluster, lctx, True))
+    # A wider grouping repeats most groups: each (families, members) is voted
+    # once (a vote that took nothing would take nothing again).
+    voted: set[tuple[int, ...]] = set()
+    for edges, fams, vctx, peel in votes:
+        g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+        ncomp, lab = connected_components(g, directed=False)
+        for comp in range(ncomp):
+            members = np.flatnonzero((lab == comp) & ~removed)
+            key = (id(fams), peel, *members.tolist())
+            if key in voted:
+                continue
+            voted.add(key)
+            if peel:
+                # Segments of these families are whole surfaces already.
+                members = np.array([m for m in members if segments[m].family not in fams], dtype=np.int64)
+            sizes = np.array([len(segments[m].indices) for m in members])
+            # A carved surface is cut into comparable pieces; a face that
+            # dominates its group (the plane a torus meets) is not one of them.
+            # Where the vote takes nothing, the largest face is set aside too
+            # (twice at most): the placement from the group's normals suits
+            # one surface of it, which need not be the carved one.
+            retries = 2
+            while True:
+                while peel and len(members) >= 2 and sizes.max() > 2 / 3 * sizes.sum():
+                    keep = np.arange(len(members)) != np.argmax(sizes)
+                    members, sizes = members[keep], sizes[keep]
+                if len(members) < 2 or sizes.max() > 2 / 3 * sizes.sum():
+                    break
+                region = np.concatenate([segments[m].indices for m in members])
+                avail = np.zeros(len(P), bool)
+                avail[region] = True
+                took = False
+                for c in recognize(np.sort(region), fams, vctx, avail):
+                    got = _covered(c, [segments[m] for m in members], ctx)
+                    got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
+                    if peel:
+                        # A carved surface is contiguous: the pieces must touch one
+                        # another, not only the peeled faces (two opposite holes of
+                        # a thin plate lie on one torus through both).
+                        got = _touching(got, edges)
+                    if len(got) < 2 or _simple_suffices([segments[m] for m, _, _ in got], ctx):
+                        continue
+                    removed[[m for m, _, _ in got]] = True
+                    added.append(_union(c, [q for _, q, _ in got], P))
+                    took = True
+                if took or not peel or retries == 0:
+                    break
+                retries -= 1
+                keep = np.arange(len(members)) != np.argmax(sizes)
+                members, sizes = members[keep], sizes[keep]
+    if added:
+        for m in np.flatnonzero(removed):
+            free[segments[m].indices] = True
+        for c in added:
+            free[c.indices] = False
+        segments[:] = [s for m, s in enumerate(segments) if not removed[m]]
+        segments.extend(grow(c, free, ctx) for c in added)
+
+def _touching(got: list, edges: np.ndarray) -> list:
+    """The largest set of ``got``'s pieces (position first) connected by ``edges`` (k, 2)."""
+    if len(got) < 2:
+        return got
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    pos = {m: i for i, (m, _, _) in enumerate(got)}
+    e = [(pos[a], pos[b]) for a, b in edges.tolist() if a in pos and b in pos]
+    if not e:
+        return []
+    r, c = np.array(e).T
+    k, lab = connected_components(coo_matrix((np.ones(len(r)), (r, c)), shape=(len(got),) * 2), directed=False)
+    big = np.bincount(lab).argmax()
+    return [g for g, l in zip(got, lab) if l == big]
+
+def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rounds: int = 10) -> None:
+    """Each complex segment, or on a noisy cloud any segment, takes the
+    adjacent segments that lie on its surface (a complex one only smaller
+    ones), in place.
+
+    On a noisy cloud the whole-cloud round places a cone or torus from all
+    the normals, which fits one of them at most: the others' slices go to
+    simpler families (two cylinder bands of a cone) before a cluster round
+    finds the rest. Noise also lets a wide cylinder take part of a plane
+    face beside the plane's own segment: the plane takes it back.
+
+    Pieces of one complex surface found apart (by different clusters, or
+    after a seam cut a group) each fit their own small patch; association
+    merges only equal parameters, and the small patches' parameters are
+    loose, so the family is voted again on the segment and those neighbours.
+    A slice of another family joins when the segment fits it about as well
+    as its own points.
+    """
+    P = ctx.pre.points
+    tried: set[tuple[int, ...]] = set()  # re-votes done: each configuration once
+    for _ in range(rounds):
+        grown = False
+        edges = smooth_adjacency(segments, ctx, smooth=False)
+        order = sorted(range(len(segments)), key=lambda i: -len(segments[i].indices))
+        segs: list[Candidate | None] = list(segments)
+        for i in order:
+            c = segs[i]
+            if c is None or (c.family.simple and not ctx.noisy):
+                continue
+            nbrs = np.unique(np.r_[edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]])
+            # A cone or torus piece may be the smallest of its surface's pieces
+            # (the slices came first); a complex segment takes only smaller ones.
+            bound = np.inf if c.family.simple else len(c.indices)
+            nbrs = [j for j in nbrs.tolist() if segs[j] is not None and len(segs[j].indices) <= bound]
+            if not nbrs:
+                continue
+            got = _covered(c, [segs[j] for j in nbrs], ctx, own_fit=True)
+            take = [(nbrs[k], q) for k, q, _ in got]
+            rest = sorted(set(nbrs) - {j for j, _ in take})
+            key = (len(c.indices), int(c.indices[0]), *(int(segs[j].indices[0]) for j in rest))
+            # (A segment of a whole-cloud family, found on a whole face, has
+            # firm parameters: it only takes what it covers.)
+            if rest and key not in tried and not (c.family.simple and c.family.global_search):
+                tried.add(key)
+                # Pieces fitted apart on small patches have loose parameters:
+                # vote the family again on them and the segment.
+                region = np.unique(np.concatenate([c.indices] + [segs[j].indices for j in rest]))
+                avail = np.zeros(len(P), bool)
+                avail[region] = True
+                for new in recognize(region, [c.family], ctx, avail):
+                    mine = _covered(new, [c], ctx)
+                    if not mine:
+                        continue
+                    more = _covered(new, [segs[j] for j in rest], ctx)
+                    if more:
+                        free[c.indices] = True
+                        c = _union(new, [mine[0][1]], P)
+                        free[c.indices] = False
+                        take += [(rest[k], q) for k, q, _ in more]
+                    break
+            for j, q in take:
+                free[segs[j].indices] = True
+                segs[j] = None
+            if take:
+                c = _union(c, [c.indices] + [q for _, q in take], P)
+                free[c.indices] = False
+                grown = True
+            segs[i] = c
+        segments[:] = [s for s in segs if s is not None]
+        if not grown:
+            break
+
+def _simple_suffices(pieces: list[Candidate], ctx: Context) -> bool:
+    """Whether one primitive of the pieces' own (simple) families, refitted on
+    all of them, explains every piece: then they are pieces of one simple
+    face (a hole split in two), for association to merge."""
+    idx = np.concatenate([s.indices for s in pieces])
+    sel = idx[np.sort(np.random.default_rng(ctx.seed).choice(len(idx), min(len(idx), 600), replace=False))]
+    for s in sorted(pieces, key=lambda s: -len(s.indices)):
+        if not s.family.simple:
+            continue
+        prim = s.family.fit(s.prim, ctx.pre.points[sel], ctx.pre.normals[sel])
+        if prim is None or not s.family.valid(prim, ctx):
+            continue
+        if len(_covered(replace(s, prim=prim), pieces, ctx, strict=False)) == len(pieces):
+            return True
+    return False
+
+def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool = False, strict: bool = True) \
+        -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """The pieces that candidate ``c`` explains: (position, points within tau
+    with compatible normals, their distances) for each piece that has 80 % of
+    its points so and that ``c`` fits no worse than its own primitive does or,
+    with ``own_fit``, no worse than half again ``c``'s fit to its own points.
+    ``strict`` (noisy clouds): also over all the piece's points (see below)."""
+    P, N = ctx.pre.points, ctx.pre.normals
+    own = c.family.distance(c.prim, P[c.indices]).mean() if own_fit else 0.0
+    out = []
+    for j, s in enumerate(pieces):
+        Q = s.indices
+        ok, d = inliers(c.family, c.prim, P[Q], N[Q], ctx.tau, ctx.cos_angle)
+        if ok.mean() < 0.8:
+            continue
+        mine = s.family.distance(s.prim, P[Q]).mean()
+        bound = max(1.1 * mine + 0.02 * ctx.tau, 1.5 * own)
+        if d[ok].mean() > bound:
+            continue
+        if strict and ctx.noisy and not own_fit:
+            # The mean over the inliers within tau (3 σ) is truncated: a
+            # surface a noise σ off the piece still passes the test above.
+            # Over all the piece's points, c must fit as well as the piece's
+            # own primitive, or the noise where that fits below it (a slice
+            # chosen for being close), within two standard errors.
+            ref = max(mine, 0.8 * ctx.pre.noise)
+            if d.mean() > ref * (1.0 + 1.5 / np.sqrt(len(Q))):
+                continue
+        out.append((j, Q[ok], d[ok]))
+    return out
+
+def _union(c: Candidate, parts: list[np.ndarray], P: np.ndarray) -> Candidate:
+    """Candidate ``c``'s primitive over the union of the index arrays ``parts``."""
+    idx = np.unique(np.concatenate(parts))
+    d = c.family.distance(c.prim, P[idx])
+    return Candidate(c.family, c.prim, idx, mean_fitting_error(d, P[idx]), {"d": d})
+
+def prefer_planes(segments: list[Candidate], families: list[Family], ctx: Context) -> int:
+    """On a noisy cloud, give a plane to each curved segment that a plane
+    fits as well, in place; returns how many.
+
+    A cylinder or sphere of radius many times a face's width sags off it by
+    less than the noise: on a noisy plane face it fits as well as the plane
+    and may win the face by size (radii of 66 and 250 diagonals after the
+    final refit, on two box faces). A cylinder, sphere or torus is compared
+    with the plane by MSAC cost over all the segment's points; the plane
+    takes the segment unless it is worse by more than two standard errors
+    (so does a short arc of a small hole that the noise leaves flat). A
+    fillet found by :mod:`houghcad.blend` keeps its primitive.
+    """
+    plane = next((f for f in families if f.name == "plane"), None)
+    if plane is None or not ctx.noisy:
+        return 0
+    P, N = ctx.pre.points, ctx.pre.normals
+    changed = 0
+    for k, s in enumerate(segments):
+        if s.family.name not in ("cylinder", "sphere", "torus") or s.extra.get("constrained") or len(s.indices) < 10:
+            continue
+        Q = P[s.indices]
+        c = Q.mean(axis=0)
+        n0 = np.linalg.eigh(np.cov(Q.T))[1][:, 0]
+        prim = plane.fit(Primitive("plane", {"normal": n0, "offset": float(n0 @ c)}), Q, N[s.indices])
+        if prim is None:
+            continue
+        d_own = np.minimum(s.family.distance(s.prim, Q), ctx.tau)
+        d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
+        if d_pl.mean() > d_own.mean() + 2.0 * d_own.std() / np.sqrt(len(Q)):
+            continue
+        d = plane.distance(prim, Q)
+        segments[k] = Candidate(plane, prim, s.indices, mean_fitting_error(d, Q), {"d": d})
+        changed += 1
+    return changed

@@ -1,0 +1,130 @@
+"""Splitting phase (paper §5.3).
+
+What the recognition step leaves is clustered with DBSCAN; every cluster is
+put in each family's standard form and recognised again. A cluster where
+nothing is recognised is over-segmented with CGAL's Efficient RANSAC
+(:mod:`houghcad.ransac`), and each RANSAC piece goes through the Hough
+recognition: RANSAC only proposes regions, the vote decides type and
+parameters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from sklearn.cluster import DBSCAN
+
+from .context import Context
+from .families import Family
+from .families.base import Primitive
+from .growth import absorb, accept
+from .preprocess import rotation_to_z
+from .ransac import ransac_pieces
+from .recognize import dense_subsets, recognize, select
+from .state import Candidate, mean_fitting_error, owners
+
+
+def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.ndarray]:
+    """DBSCAN clusters (global indices) of the points ``idx``, largest first."""
+    if len(idx) < ctx.min_points:
+        return []
+    lab = DBSCAN(eps=ctx.link, min_samples=min_samples).fit_predict(ctx.pre.points[idx])
+    out = [idx[lab == k] for k in range(lab.max() + 1)]
+    out = [c for c in out if len(c) >= ctx.min_points]
+    return sorted(out, key=lambda c: (-len(c), int(c[0])))
+
+def splitting_phase(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate],
+                    max_rounds: int = 6, progress=None) -> None:
+    """Iterate DBSCAN clustering + recognition on what is left, in place."""
+    lctx = replace(ctx, local=True)
+    for _ in range(max_rounds):
+        rest = np.flatnonzero(free)
+        found_any = False
+        for cl in clusters(rest, ctx):
+            cl = cl[free[cl]]
+            if len(cl) < ctx.min_points:
+                continue
+            found = recognize(cl, families, lctx, free)
+            if not found:
+                found = coaxial_bands(cl, families, segments, free, lctx)
+            if not found and len(cl) >= 3 * ctx.min_points:
+                for piece in ransac_pieces(cl, ctx):
+                    got = recognize(piece, families, lctx, free)
+                    for c in got:  # hide from the next pieces; accept() below takes them
+                        free[c.indices] = False
+                    found += got
+                for c in found:
+                    free[c.indices] = True
+            accept(found, free, ctx, segments)
+            found_any |= bool(found)
+            if found:
+                absorb(segments, free, ctx)
+            if progress is not None:
+                progress(len(cl))
+        if not found_any:
+            break
+
+def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candidate], free: np.ndarray,
+                  ctx: Context) -> list[Candidate]:
+    """Cylinders about the axes of the adjacent segments, for a cluster the
+    normals could not place.
+
+    A small hole or a band a few rows high between two faces has no point
+    whose neighbourhood lies on it alone: its PCA normals are blends and
+    neither the axis estimate nor the vote finds it, while its boundary rows,
+    which lie on it too, went to the faces around it. On CAD parts such a
+    feature is mostly coaxial with, or perpendicular to, a neighbour: take
+    those directions as axes, the circle through the cluster's projection as
+    the placement, and refit on the cluster and the adjacent boundary points
+    that lie on the cylinder (one free row alone does not fix a tilt).
+    """
+    cyl = next((f for f in families if f.name == "cylinder"), None)
+    if cyl is None or not segments or len(cl) < ctx.min_points:
+        return []
+    P = ctx.pre.points
+    owner = owners(segments, len(P))
+    k = min(12, len(P))
+    dist, nb = ctx.pre.tree.query(P[cl], k=k, distance_upper_bound=ctx.link)
+    nb = nb[np.isfinite(dist)]
+    adj = np.unique(owner[nb])
+    adj = adj[adj >= 0]
+    border = np.unique(nb[owner[nb] >= 0])
+    axes: list[np.ndarray] = []
+    for j in adj:
+        fr = segments[j].family.frame(segments[j].prim)
+        if fr is None or fr.direction is None:
+            continue
+        a = np.asarray(fr.direction, float)
+        if all(abs(a @ b) < np.cos(np.radians(2.0)) for b in axes):
+            axes.append(a)
+    out = []
+    ext = np.concatenate([cl, border])
+    for a in axes:
+        R = rotation_to_z(a)
+        Q = (P[cl] @ R.T)[:, :2]
+        A = np.c_[2 * Q, np.ones(len(Q))]
+        sol = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0]
+        r2 = sol[2] + sol[:2] @ sol[:2]
+        if not 0 < r2 < ctx.max_radius**2:
+            continue
+        prim = Primitive("cylinder", {"axis_point": R.T @ np.array([sol[0], sol[1], 0.0]), "axis": a,
+                                      "radius": float(np.sqrt(r2))})
+        for _ in range(2):
+            on = ext[cyl.distance(prim, P[ext]) < 2 * ctx.tau]
+            if np.isin(cl, on).mean() < 0.8:
+                break
+            new = cyl.fit(prim, P[on], ctx.pre.normals[on])
+            if new is None or not cyl.valid(new, ctx):
+                break
+            prim = new
+        else:
+            d = cyl.distance(prim, P[cl])
+            ok = d < ctx.tau
+            if ok.mean() < 0.8:
+                continue
+            sel = cl[ok]
+            for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
+                out.append(Candidate(cyl, prim, sel[comp], mean_fitting_error(d[ok][comp], P[sel[comp]]),
+                                     {"d": d[ok][comp]}))
+    return select(out, free, ctx)
