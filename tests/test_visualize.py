@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import base64
+import importlib.resources
 import json
 import os
 import re
 import shutil
+import subprocess
 import tempfile
 from pathlib import Path
 
@@ -227,6 +229,37 @@ def test_html_report_subsamples_huge_clouds():
     data = _embedded(build_html_report(pts, res, max_points=100))
     assert data["n_drawn"] == 100 and sum(t["drawn"] for t in data["traces"]) == 100
     assert len(base64.b64decode(data["xyz"])) == 100 * 12
+
+
+def _report_asset(name: str) -> str:
+    """A report asset as the package ships it (read here, not through htmlreport)."""
+    return (importlib.resources.files("houghcad") / "data" / "report" / name).read_text(encoding="utf-8")
+
+
+def test_html_report_viewer_script_passes_node_check(tmp_path):
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node (Node.js) not on PATH: cannot syntax-check data/report/viewer.js")
+    script = importlib.resources.files("houghcad") / "data" / "report" / "viewer.js"
+    with importlib.resources.as_file(script) as path:
+        proc = subprocess.run([node, "--check", str(path)], check=False, capture_output=True, text=True,
+                              timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    # The check can fail: the same script cut short is rejected.
+    broken = tmp_path / "broken.js"
+    broken.write_text(_report_asset("viewer.js").rsplit("})();", 1)[0], encoding="utf-8")
+    rejected = subprocess.run([node, "--check", str(broken)], check=False, capture_output=True, timeout=120)
+    assert rejected.returncode != 0
+
+
+def test_html_report_inlines_viewer_and_style():
+    js, css = _report_asset("viewer.js"), _report_asset("report.css")
+    # Either would end its element early once inlined.
+    assert "</script" not in js.lower() and "</style" not in css.lower()
+    assert 'getElementById("houghcad-data")' in js  # the data come from the JSON block, not the asset
+    text = build_html_report(*_hand_result())
+    assert re.findall(r"<script>\n(.*?)</script>", text, re.DOTALL) == [js]
+    assert re.findall(r"<style>\n(.*?)</style>", text, re.DOTALL) == [css]
 
 
 # --------------------------------------------------------------------------- HTML in headless Chromium
