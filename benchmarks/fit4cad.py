@@ -13,8 +13,10 @@ out-of-memory kill costs one row, not the run. A failed cloud scores 0 on every 
 
 Unless ``--no-write``: the summary and a per-cloud table replace (or append) the section between
 ``<!-- fit4cad:LABEL:begin -->`` and ``<!-- fit4cad:LABEL:end -->`` of ``BENCHMARKS.md`` at the
-repository root, and the rows go to ``benchmarks/results/fit4cad-LABEL.csv``. An explicit ``--out``
-writes the CSV even with ``--no-write``.
+repository root, a dated entry with the command, the machine and the summary goes to the top of
+``docs/benchmark-log.md`` (BENCHMARKS.md shows the current figures, the log keeps their history),
+and the rows go to ``benchmarks/results/fit4cad-LABEL.csv``. An explicit ``--out`` writes the CSV
+even with ``--no-write``.
 """
 
 from __future__ import annotations
@@ -45,6 +47,9 @@ import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS_MD = REPO_ROOT / "BENCHMARKS.md"
+BENCHMARK_LOG = REPO_ROOT / "docs" / "benchmark-log.md"
+#: The line of the log after which new entries go (newest first).
+LOG_MARKER = "<!-- benchmark-log:newest -->"
 RESULTS_DIR = REPO_ROOT / "benchmarks" / "results"
 DEFAULT_SEGMENTER = "houghcad.pipeline:segment"
 MEASURES = ("DSC", "PPV", "TPR", "TNR", "NPV", "ACC")
@@ -362,15 +367,21 @@ def _machine() -> str:
     return f"nproc {nproc}{cpu}, {py}" + (f"; {', '.join(libs)}" if libs else "")
 
 
+def _now() -> str:
+    """The date and time stamped on a section and its log entry (local time, with its offset)."""
+    return _dt.datetime.now().astimezone().isoformat(timespec="seconds")
+
+
 def section_markdown(
-    label: str, rows: list[dict[str, Any]], s: dict[str, Any], command: str, date: str
+    label: str, rows: list[dict[str, Any]], s: dict[str, Any], command: str, date: str,
+    machine: str | None = None,
 ) -> str:
     """The BENCHMARKS.md section, markers included."""
     out = io.StringIO()
     w = out.write
     w(f"<!-- fit4cad:{label}:begin -->\n")
     w(f"## Fit4CAD: {label}\n\n")
-    w(f"- Date: {date}\n- Command: `{command}`\n- Machine: {_machine()}\n")
+    w(f"- Date: {date}\n- Command: `{command}`\n- Machine: {machine or _machine()}\n")
     w(f"- Clouds: {s['n_clouds']}, failures: {s['n_failed']} (a failure scores 0 on every measure)\n\n")
     w("| measure | mean | median |\n|---|---|---|\n")
     for m in MEASURES:
@@ -429,18 +440,61 @@ def replace_section(md_path: Path, marker: str, section: str) -> None:
     atomic_write(md_path, text)
 
 
+LOG_HEADER = f"""# Benchmark log
+
+The history of houghcad's benchmark figures, newest first; the current figures are in
+[BENCHMARKS.md](../BENCHMARKS.md). A benchmark script that publishes a section there (run without
+`--no-write`) adds an entry at the top of this log: its date, command, machine and headline figures.
+
+{LOG_MARKER}
+"""
+
+
+def log_entry(title: str, date: str, command: str, machine: str, summary: list[str]) -> str:
+    """A dated entry of the benchmark log: heading, command, machine and ``summary`` (the headline
+    figures, one bullet each; a leading ``- `` is added where missing)."""
+    lines = [f"## {date}, {title}", "", f"- Command: `{command}`", f"- Machine: {machine}"]
+    lines += [x if x.startswith("- ") else f"- {x}" for x in summary if x.strip()]
+    return "\n".join(lines) + "\n"
+
+
+def append_log(log_path: Path, entry: str) -> None:
+    """Add *entry* to the benchmark log at *log_path*, newest first: right after the
+    ``LOG_MARKER`` line (a log without it gets it before its first ``## `` entry, or at its end; a
+    missing log is started); written whole or not at all."""
+    text = log_path.read_text(encoding="utf-8") if log_path.exists() else LOG_HEADER
+    if LOG_MARKER not in text:
+        m = re.search(r"^## ", text, re.MULTILINE)
+        at = m.start() if m else len(text)
+        head = text[:at].rstrip("\n")
+        text = (head + "\n\n" if head else "") + LOG_MARKER + "\n" + ("\n" + text[at:] if m else "")
+    end = text.find("\n", text.index(LOG_MARKER))
+    end = len(text) if end < 0 else end + 1
+    head, tail = text[:end], text[end:]
+    if not head.endswith("\n"):
+        head += "\n"
+    tail = tail.lstrip("\n")
+    atomic_write(log_path, head + "\n" + entry + ("\n" + tail if tail else ""))
+
+
 def publish_section(marker: str, title: str, script: str, argv: list[str] | None, notes: list[str],
-                    body: list[str], write: bool) -> str:
+                    body: list[str], write: bool, summary: list[str] | None = None,
+                    md_path: Path | None = None, log_path: Path | None = None) -> str:
     """The BENCHMARKS.md section of the synthetic benchmark scripts: markers, title, date, the
-    command that produced it (``script`` with ``argv``), ``notes`` (bullet lines) and ``body``;
-    printed, and written between the markers when ``write``."""
-    cmd = f"python benchmarks/{script} " + " ".join(shlex.quote(x) for x in (argv or sys.argv[1:]))
+    command that produced it (``script`` with ``argv``, default ``sys.argv[1:]``), the machine,
+    ``notes`` (bullet lines) and ``body``; printed. When ``write``, the section replaces the one
+    between the markers of *md_path* (default BENCHMARKS.md) and a dated entry with the command,
+    the machine and ``summary`` (the headline figures; default ``notes``) goes to the top of
+    *log_path* (default docs/benchmark-log.md)."""
+    cmd = shlex.join(["python", f"benchmarks/{script}", *(sys.argv[1:] if argv is None else argv)])
+    date, machine = _now(), _machine()
     section = "\n".join([
         f"<!-- {marker}:begin -->",
         f"## {title}",
         "",
-        f"- Date: {_dt.date.today().isoformat()}",
-        f"- Command: `{cmd.strip()}`",
+        f"- Date: {date}",
+        f"- Command: `{cmd}`",
+        f"- Machine: {machine}",
         *notes,
         "",
         *body,
@@ -449,7 +503,9 @@ def publish_section(marker: str, title: str, script: str, argv: list[str] | None
     ])
     print(section)
     if write:
-        replace_section(BENCHMARKS_MD, marker, section)
+        replace_section(md_path or BENCHMARKS_MD, marker, section)
+        append_log(log_path or BENCHMARK_LOG,
+                   log_entry(title, date, cmd, machine, notes if summary is None else summary))
     return section
 
 
@@ -479,7 +535,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=1, help="clouds run at once (default 1)")
     p.add_argument("--timeout", type=float, default=600.0, help="seconds per cloud (default 600)")
     p.add_argument("--no-write", action="store_true",
-                   help="do not update BENCHMARKS.md nor the default CSV")
+                   help="do not update BENCHMARKS.md, docs/benchmark-log.md nor the default CSV")
     p.add_argument("--out", type=Path, default=None,
                    help="CSV file (*.csv) or folder for fit4cad-LABEL.csv "
                         "(default benchmarks/results/); written even with --no-write when given")
@@ -521,7 +577,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{done}/{total}] {r['name']}  DSC {r['DSC']:.3f}  {_fmt(r['seconds'], 2)} s  {status}",
               file=sys.stderr, flush=True)
 
-    date = _dt.datetime.now().astimezone().isoformat(timespec="seconds")
+    date = _now()
     rows = run_clouds(clouds, args.families, args.jobs, args.timeout, args.segmenter, progress)
     s = summarize(rows)
     print(summary_text(s), file=sys.stderr)
@@ -534,8 +590,12 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_write:
         command = shlex.join(["python", sys.argv[0] if argv is None else "benchmarks/fit4cad.py",
                               *argv_used])
-        write_section(BENCHMARKS_MD, args.label, section_markdown(args.label, rows, s, command, date))
+        machine = _machine()
+        write_section(BENCHMARKS_MD, args.label, section_markdown(args.label, rows, s, command, date, machine))
         print(f"wrote {BENCHMARKS_MD} (section {args.label})", file=sys.stderr)
+        summary = [line.replace("  ", "; ") for line in summary_text(s).splitlines()]
+        append_log(BENCHMARK_LOG, log_entry(f"Fit4CAD: {args.label}", date, command, machine, summary))
+        print(f"wrote {BENCHMARK_LOG} (entry {date})", file=sys.stderr)
     return 1 if s["n_failed"] == len(rows) else 0
 
 

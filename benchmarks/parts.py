@@ -13,8 +13,8 @@ Each run is scored with the Fit4CAD measures (mean DSC over the part's faces); t
 the mean over seeds, each seed's figure, the face with the lowest DSC over the seeds and the
 median time.
 
-The summary goes between the ``<!-- parts:begin/end -->`` markers of BENCHMARKS.md unless
-``--no-write``.
+The summary goes between the ``<!-- parts:begin/end -->`` markers of BENCHMARKS.md, and a dated
+entry with the mean DSC per noise level to the top of docs/benchmark-log.md, unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -61,6 +61,7 @@ def main(argv=None) -> int:
                   f"worst {r['worst'][1]} {r['worst'][0]:.2f}  {r['seconds']:.1f} s", file=sys.stderr, flush=True)
     lines = [NEAREST_NOTE, "", "| part | noise σ | mean DSC | per seed | nearest true face | worst face (DSC) | median s |",
              "|---|---|---|---|---|---|---|"]
+    summary = []
     for nz in noise:
         for p in parts:
             rs = [r for r in rows if r["part"] == p and r["noise"] == nz]
@@ -73,10 +74,14 @@ def main(argv=None) -> int:
         lines.append(f"| **all** | {nz:g} | **{np.mean([r['dsc'] for r in rs]):.3f}** | | "
                      f"{_mean_or_dash([r['nearest'] for r in rs])} | | "
                      f"{np.median([r['seconds'] for r in rs]):.1f} |")
+        summary.append(f"Noise σ {nz:g}: mean DSC {np.mean([r['dsc'] for r in rs]):.3f} (nearest true face "
+                       f"{_mean_or_dash([r['nearest'] for r in rs])}); per part "
+                       + ", ".join(f"{p} {np.mean([r['dsc'] for r in rs if r['part'] == p]):.3f}" for p in parts)
+                       + f"; median {np.median([r['seconds'] for r in rs]):.1f} s")
     publish_section("parts", "Synthetic parts", "parts.py", argv, [
         f"- {a.seeds} seeds per part and noise level, {a.points} points, random pose; "
         f"`segment(families=\"{a.families}\")`; mean DSC over the part's faces (Fit4CAD measure).",
-    ], lines, not a.no_write)
+    ], lines, not a.no_write, summary=summary)
     return 0
 
 

@@ -11,8 +11,8 @@ passes when the largest segment has the right type, holds at least 70 % of the p
 world parameters are within :data:`houghcad.evaluate.PARAMETER_TOLERANCES` (radius and offset
 errors ≤ 1 % of the diagonal, axis errors ≤ 1°).
 
-The summary goes between the ``<!-- singles:begin/end -->`` markers of BENCHMARKS.md unless
-``--no-write``.
+The summary goes between the ``<!-- singles:begin/end -->`` markers of BENCHMARKS.md, and a dated
+entry with the pass counts to the top of docs/benchmark-log.md, unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -83,13 +83,19 @@ def main(argv=None) -> int:
                              for r in rs if not r["ok"])
             lines.append(f"| {f} | {nz:g} | {sum(r['ok'] for r in rs)}/{len(rs)} | {worst} | {miss} | "
                          f"{np.median([r['seconds'] for r in rs]):.1f} |")
+    passed = {nz: [r["ok"] for r in rows if r["noise"] == nz] for nz in noises}
+    summary = [f"Passed: {sum(sum(v) for v in passed.values())}/{len(rows)} ("
+               + "; ".join(f"noise σ {nz:g}: {sum(v)}/{len(v)}" for nz, v in passed.items()) + ")"]
+    misses = [f"{r['family']} noise σ {r['noise']:g} seed {r['seed']}" for r in rows if not r["ok"]]
+    if misses:
+        summary.append("Misses: " + ", ".join(misses))
     publish_section("singles", "Simple primitives (issue 2)", "singles.py", argv, [
         f"- {a.seeds} seeds per family and noise level, {a.points} points, random pose and scale; "
         "`segment(points)`.",
         f"- Pass: the largest segment has the right type, ≥ {MIN_COVERAGE:.0%} of the points, radius / offset / "
         "centre / apex / axis-line errors ≤ 1 % of the diagonal, axis, normal and half-angle errors ≤ 1°. "
         "Angles in degrees, lengths as fractions of the diagonal.",
-    ], lines, not a.no_write)
+    ], lines, not a.no_write, summary=summary)
     return 0
 
 

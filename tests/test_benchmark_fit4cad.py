@@ -7,6 +7,7 @@ import csv
 import importlib
 import importlib.util
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -142,6 +143,91 @@ def test_write_section_replaces_or_appends(tmp_path: Path):
     assert text.count("fit4cad:simple:begin") == 1 and "\nB\n" in text and "<details>" not in text
     assert "hand-written notes" in text and text.index("simple:end") < text.index("all:begin")
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def _no_tmp_left(folder: Path) -> bool:
+    return not [p for p in folder.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_append_log_puts_newest_first(tmp_path: Path):
+    log = tmp_path / "docs" / "benchmark-log.md"
+    bench.append_log(log, bench.log_entry("Fit4CAD: simple", "2024-01-01T10:00:00+00:00", "python a",
+                                          "machine A", ["DSC mean 0.900", "- already a bullet"]))
+    text = log.read_text()
+    assert text.startswith("# Benchmark log\n") and bench.LOG_MARKER in text
+    assert "## 2024-01-01T10:00:00+00:00, Fit4CAD: simple\n\n- Command: `python a`\n- Machine: machine A\n" in text
+    assert "- DSC mean 0.900\n- already a bullet\n" in text and "- - " not in text
+    bench.append_log(log, bench.log_entry("Synthetic parts", "2024-01-02T10:00:00+00:00", "python b", "m", ["x"]))
+    text = log.read_text()
+    assert text.index(bench.LOG_MARKER) < text.index("2024-01-02") < text.index("2024-01-01")
+    assert "\n\n\n" not in text and text.endswith("\n") and _no_tmp_left(log.parent)
+
+
+def test_append_log_keeps_hand_written_history(tmp_path: Path):
+    log = tmp_path / "log.md"
+    log.write_text("# Log\n\nIntro.\n\n## 2020-01-01, old session\n\nold narrative\n")
+    bench.append_log(log, bench.log_entry("T", "2024-01-01", "python c", "m", ["new figure"]))
+    text = log.read_text()
+    assert text.startswith("# Log\n\nIntro.\n\n" + bench.LOG_MARKER + "\n\n## 2024-01-01, T\n")
+    assert text.index("new figure") < text.index("## 2020-01-01, old session") and text.endswith("old narrative\n")
+
+
+def test_publish_section_writes_section_and_log_entry(tmp_path: Path, capsys):
+    md, log = tmp_path / "BENCHMARKS.md", tmp_path / "benchmark-log.md"
+    md.write_text("# Benchmarks\n\n<!-- parts:begin -->\nold figures\n<!-- parts:end -->\n\nafter\n")
+    log.write_text(f"# Benchmark log\n\n{bench.LOG_MARKER}\n\n## 2020-01-01, older\n\n- kept\n")
+    kw = dict(md_path=md, log_path=log)
+    section = bench.publish_section("parts", "Synthetic parts", "parts.py", [], ["- note"],
+                                    ["| a | b |", "|---|---|", "| 1 | 2 |"], False, summary=["mean 0.9"], **kw)
+    assert "old figures" in md.read_text() and "mean 0.9" not in log.read_text()  # not written
+    assert "- Command: `python benchmarks/parts.py`\n" in section  # argv [] is not sys.argv
+    assert "- Machine: " + bench._machine() + "\n" in section and "- Date: " in section
+    bench.publish_section("parts", "Synthetic parts", "parts.py", ["--jobs", "2", "--noise", "0, 1"],
+                          ["- note"], ["| a | b |"], True, summary=["mean 0.9"], **kw)
+    text = md.read_text()
+    assert "old figures" not in text and text.count("<!-- parts:begin -->") == 1 and text.endswith("after\n")
+    assert "- Command: `python benchmarks/parts.py --jobs 2 --noise '0, 1'`\n- Machine: " in text
+    date = next(ln for ln in text.splitlines() if ln.startswith("- Date: "))[len("- Date: "):]
+    entries = log.read_text()
+    assert f"## {date}, Synthetic parts\n\n- Command: `python benchmarks/parts.py --jobs 2 --noise '0, 1'`\n" in entries
+    assert "\n- mean 0.9\n" in entries and entries.index(date) < entries.index("2020-01-01")
+    assert entries.endswith("- kept\n") and _no_tmp_left(tmp_path)
+    # without a summary, the notes go to the log
+    bench.publish_section("parts", "Synthetic parts", "parts.py", [], ["- note"], [], True, **kw)
+    assert "\n- note\n" in log.read_text().split("## 2020-01-01")[0]
+    capsys.readouterr()
+
+
+def test_main_publishes_section_and_log_entry(tiny_set: Path, tmp_path: Path, monkeypatch):
+    md, log = tmp_path / "BENCHMARKS.md", tmp_path / "docs" / "benchmark-log.md"
+    monkeypatch.setattr(bench, "BENCHMARKS_MD", md)
+    monkeypatch.setattr(bench, "BENCHMARK_LOG", log)
+    monkeypatch.setattr(bench, "RESULTS_DIR", tmp_path / "results")
+    args = [str(tiny_set), "--names", "PC2", "--segmenter", f"{_HERE}:zlevel_segmenter", "--label", "t"]
+    assert bench.main([*args, "--no-write"]) == 0
+    assert not md.exists() and not log.exists()
+    assert bench.main(args) == 0
+    section = md.read_text()
+    assert "<!-- fit4cad:t:begin -->" in section and "- Machine: " in section
+    entries = log.read_text()
+    assert entries.count(", Fit4CAD: t\n") == 1 and "- Command: `python benchmarks/fit4cad.py " in entries
+    assert "- DSC mean 1.000; median 1.000\n" in entries and "- clouds: 1; failures: 0\n" in entries
+    assert (tmp_path / "results" / "fit4cad-t.csv").exists()
+
+
+def test_repository_files_hold_every_scripts_markers():
+    """Every section a benchmark script rewrites is in BENCHMARKS.md, once, and the log has the
+    line after which the scripts add their entries."""
+    text = (_REPO / "BENCHMARKS.md").read_text(encoding="utf-8")
+    markers = {"fit4cad:simple", "fit4cad:all"}
+    for script in (_REPO / "benchmarks").glob("*.py"):
+        markers |= set(re.findall(r'publish_section\(\s*"([^"]+)"', script.read_text(encoding="utf-8")))
+    assert {"parts", "complex", "singles", "association"} <= markers
+    for m in sorted(markers):
+        begin, end = f"<!-- {m}:begin -->", f"<!-- {m}:end -->"
+        assert text.count(begin) == 1 and text.count(end) == 1 and text.index(begin) < text.index(end), m
+    log = (_REPO / "docs" / "benchmark-log.md").read_text(encoding="utf-8")
+    assert log.count(bench.LOG_MARKER) == 1
 
 
 # --------------------------------------------------------------------------- real pipeline
