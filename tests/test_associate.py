@@ -15,7 +15,7 @@ from houghcad import synth
 from houghcad.associate import Associator, extent
 from houghcad.families import REGISTRY, Primitive
 from houghcad.preprocess import preprocess
-from houghcad.state import Candidate
+from houghcad.state import SegmentView
 
 RNG = np.random.default_rng(7)
 
@@ -79,7 +79,7 @@ def _associate(blocks, merge=True, **options):
         idx = np.arange(start, start + len(pts))
         start += len(pts)
         fam = REGISTRY[name]
-        cands.append(Candidate(fam, _std(pre, name, params), idx, 0.0))
+        cands.append(SegmentView(fam, _std(pre, name, params), idx))
     tau = max(0.1 * pre.spacing, 3 * pre.noise)
     link = max(2 * pre.spacing, 1.5 * pre.reach)
     return Associator(merge=merge, **options).fit(cands, pre, tau, link)

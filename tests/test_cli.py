@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.resources
 import io
 import json
+import shutil
 import subprocess
 import sys
 import types
@@ -310,6 +311,8 @@ def test_demo_with_stub(tmp_path, capsys, monkeypatch, fake_pipeline):
     from houghcad.io import write_points_ply
 
     write_points_ply(data / "demo_part.ply", _blob(300))
+    # The stand-in package keeps the report's script and style.
+    shutil.copytree(importlib.resources.files("houghcad") / "data" / "report", data / "report")
     monkeypatch.setattr(importlib.resources, "files", lambda pkg: tmp_path / "pkg")
     monkeypatch.chdir(tmp_path)
     assert main(["demo"]) == 0
@@ -389,6 +392,38 @@ def test_segment_real_pipeline(tmp_path, capsys):
     assert prim.count("Primitive") == sum(max(1, len(s.get("parts", []))) for s in data["segments"])
     table = capsys.readouterr().out
     assert "plane" in table and "unsegmented" in table
+
+
+def test_segment_trace_writes_the_labels_after_every_pass(tmp_path):
+    from plyfile import PlyData
+
+    pts = _parts_cloud()
+    inp = _write_xyz(tmp_path / "parts.xyz", pts)
+    out = tmp_path / "parts.json"
+    trace = tmp_path / "trace"
+    assert main(["segment", str(inp), "-o", str(out), "--trace", str(trace), "-q"]) == 0
+    files = sorted(p.name for p in trace.iterdir())
+    assert files[0] == "01_recognition.ply" and files[-1].endswith("_association.ply")
+    assert [int(f[:2]) for f in files] == list(range(1, len(files) + 1))
+    data = json.loads(out.read_text())
+    assert set(data["timing"]) >= {f[3:-4] for f in files}
+    last = PlyData.read(str(trace / files[-1]))
+    assert "houghcad pass association" in last.comments
+    lab = np.asarray(last["vertex"]["segment"])
+    assert len(lab) == len(pts)
+    # The last trace is the result's partition (ids are numbered by size in the result).
+    mine = sorted(np.bincount(lab[lab >= 0]).tolist())
+    assert mine == sorted(len(s["indices"]) for s in data["segments"])
+    np.testing.assert_array_equal(np.flatnonzero(lab < 0), data["unsegmented"])
+
+
+def test_segment_trace_on_a_file_is_refused(tmp_path, capsys, fake_pipeline):
+    inp = _write_xyz(tmp_path / "parts.xyz", _parts_cloud())
+    (tmp_path / "afile").write_text("x")
+    assert main(["segment", str(inp), "-o", str(tmp_path / "o.json"), "--trace", str(tmp_path / "afile")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--trace needs a directory" in err
+    assert not (tmp_path / "o.json").exists()
 
 
 def test_demo_real(tmp_path, capsys):
@@ -544,6 +579,8 @@ def test_demo_writes_every_view(tmp_path, capsys, monkeypatch, fake_pipeline):
     from houghcad.io import write_points_ply
 
     write_points_ply(data / "demo_part.ply", _blob(300))
+    # The stand-in package keeps the report's script and style.
+    shutil.copytree(importlib.resources.files("houghcad") / "data" / "report", data / "report")
     monkeypatch.setattr(importlib.resources, "files", lambda pkg: tmp_path / "pkg")
     assert main(["demo", "-o", str(tmp_path / "d")]) == 0
     names = sorted(p.name for p in (tmp_path / "d").iterdir())

@@ -56,7 +56,7 @@ def test_selection_judges_noisy_candidates_by_their_excess_over_the_noise():
     def cand(idx, mean_d):
         d = np.abs(rng.normal(0, 1, len(idx)))
         d *= mean_d / d.mean()
-        return Candidate(fam, None, idx, mean_fitting_error(d, P[idx]), {"d": d})
+        return Candidate(fam, None, idx, mean_fitting_error(d, P[idx]), d)
 
     idx = np.arange(len(P))
     at_noise, above = cand(idx, 0.8 * sigma), cand(idx[: len(idx) * 95 // 100], 1.6 * sigma)
@@ -104,7 +104,7 @@ def test_a_candidate_competes_with_every_one_it_would_displace():
 
     def cand(name, idx, d):
         d = np.full(len(idx), d)
-        return Candidate(REGISTRY[name], None, idx, mean_fitting_error(d, P[idx]), {"d": d})
+        return Candidate(REGISTRY[name], None, idx, mean_fitting_error(d, P[idx]), d)
 
     a, b = np.arange(0, 100), np.arange(100, 200)
     wide = np.r_[a[:45], b[:45], np.arange(200, 300)]

@@ -6,10 +6,10 @@ import numpy as np
 
 from .boundaries import _neighbour_owners
 from .context import Context
-from .state import Candidate, owners
+from .state import Segmentation
 
 
-def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth: bool = True,
+def smooth_adjacency(seg: Segmentation, ctx: Context, k: int = 8, smooth: bool = True,
                      crease: float | None = None) -> np.ndarray:
     """Pairs (m, 2) of segments that meet along a tangent-continuous boundary.
 
@@ -22,12 +22,12 @@ def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth
     (radians): the angle within which normals agree (default: half the
     angle tolerance).
     """
-    if len(segments) < 2:
+    if len(seg) < 2:
         return np.zeros((0, 2), np.int64)
     P = ctx.pre.points
-    owner = owners(segments, len(P))
+    owner = seg.owner()
     sn = np.zeros_like(P)
-    for s in segments:
+    for s in seg:
         sn[s.indices] = s.family.surface_normals(s.prim, P[s.indices])
     pts = np.flatnonzero(owner >= 0)
     nb, other = _neighbour_owners(owner, pts, ctx, ctx.link, k)
@@ -36,7 +36,7 @@ def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth
     mask = (other >= 0) & (other != mine)
     if not mask.any():
         return np.zeros((0, 2), np.int64)
-    n = len(segments)
+    n = len(seg)
     a, b = np.broadcast_to(mine, other.shape)[mask], other[mask]
     pi = np.broadcast_to(pts[:, None], other.shape)[mask]
     pair = np.minimum(a, b) * n + np.maximum(a, b)
@@ -48,7 +48,7 @@ def smooth_adjacency(segments: list[Candidate], ctx: Context, k: int = 8, smooth
     agree = cos[mask] >= np.cos(0.5 * ctx.angle if crease is None else crease)
     share = np.bincount(np.searchsorted(pair_u, pair), weights=agree, minlength=len(pair_u)) / \
         np.bincount(np.searchsorted(pair_u, pair), minlength=len(pair_u))
-    sizes = np.array([len(s.indices) for s in segments])
+    sizes = seg.sizes()
     u, v = pair_u // n, pair_u % n
     keep = ((share >= 0.5) | (not smooth)) & (count >= np.maximum(3, np.sqrt(np.minimum(sizes[u], sizes[v])) / 3))
     return np.stack([u[keep], v[keep]], axis=1)

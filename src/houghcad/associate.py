@@ -30,7 +30,7 @@ fractions of its diagonal, so they are relative to the model's size.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
@@ -39,7 +39,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .families.base import Family, Frame, Primitive, regular_indices, unit
-from .state import Candidate
+from .state import SegmentView
 
 __all__ = ["Associator", "Item", "RawGroup", "extent", "pivot"]
 
@@ -160,11 +160,6 @@ def _clusters(D: np.ndarray, keep: np.ndarray | None = None) -> list[list[int]]:
     return out
 
 
-def _fixed(c: Candidate) -> bool:
-    """Whether a segment's primitive is kept as it is (``extra["constrained"]``)."""
-    return bool(c.extra.get("constrained", False))
-
-
 class Associator:
     """Find maximal primitives and relations between segments (paper §5.4).
 
@@ -206,7 +201,7 @@ class Associator:
         self.extent_tol = extent_tol
 
     # ------------------------------------------------------------------ entry point
-    def fit(self, cands: list[Candidate], pre, tau: float, link: float) -> "Associator":
+    def fit(self, cands: list[SegmentView], pre, tau: float, link: float) -> "Associator":
         """Associate segments ``cands`` (standard frame) of the preprocessed cloud ``pre``.
 
         ``tau`` is the inlier threshold and ``link`` the neighbour distance of the
@@ -220,8 +215,7 @@ class Associator:
         self._E = 0.02 * diag
         # Parts are compared by their final least-squares fits: the recognition
         # fits of small segments can be a degree or two off.
-        cands = [c if _fixed(c) else
-                 Candidate(c.family, self._refit(c.family, c.prim, np.sort(c.indices)), c.indices, c.mfe, c.extra)
+        cands = [c if c.fixed else replace(c, prim=self._refit(c.family, c.prim, np.sort(c.indices)))
                  for c in cands]
         self._own = [self._mean_residual(c.family, c.prim, c.indices) for c in cands]
         adjacency = self._adjacency(cands, link)
@@ -233,7 +227,7 @@ class Associator:
             parts_of = self._parts(members, adjacency)
             if len(members) == 1:
                 c = cands[members[0]]
-                items.append(Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], members, _fixed(c)))
+                items.append(Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], members, c.fixed))
                 continue
             same.append((members, len(parts_of)))
             idx = np.sort(np.concatenate([cands[m].indices for m in members]))
@@ -249,7 +243,7 @@ class Associator:
             self.items_ = items
         else:
             # Raw segments stay; groups over maximal items expand to their members.
-            raw = [Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], [k], _fixed(c))
+            raw = [Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], [k], c.fixed)
                    for k, c in enumerate(cands)]
             expanded = [RawGroup(g.kind, sorted(m for i in g.members for m in items[i].members), g.descriptors)
                         for g in groups]
@@ -271,7 +265,7 @@ class Associator:
             out = None
         return out if out is not None else prim
 
-    def _adjacency(self, cands: list[Candidate], link: float) -> set[tuple[int, int]]:
+    def _adjacency(self, cands: list[SegmentView], link: float) -> set[tuple[int, int]]:
         """Pairs (i < j) of segments in contact along a line, not at a point.
 
         Points closer than ``link`` to the other segment are the contact. Two
@@ -353,7 +347,7 @@ class Associator:
             d = max(d, float(np.linalg.norm(f.anchor - g.anchor)) / L)
         return d
 
-    def _surfaces(self, cands: list[Candidate]) -> list[list[int]]:
+    def _surfaces(self, cands: list[SegmentView]) -> list[list[int]]:
         """Partition of the segments into sets lying on one surface."""
         out: list[list[int]] = []
         by_family: dict[str, list[int]] = {}
@@ -373,7 +367,7 @@ class Associator:
                 out.extend(self._verify(cands, grp))
         return sorted(out, key=lambda m: m[0])
 
-    def _verify(self, cands: list[Candidate], grp: list[int]) -> list[list[int]]:
+    def _verify(self, cands: list[SegmentView], grp: list[int]) -> list[list[int]]:
         """Split a proposed surface into sets that one refitted primitive explains:
         greedily from the largest, a member joins when the union's fit keeps every
         member within its own residual plus τ/2."""

@@ -32,7 +32,7 @@ geometry below is a few lines of numpy.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 from .families import Family
 from .families.base import Primitive, radial, unit
 from .context import Context
-from .state import Candidate, mean_fitting_error, owners
+from .state import SegmentRecord, SegmentView, Segmentation
 
 #: Likelihood-ratio threshold: (SSE(sharp) − SSE(fillet)) / σ² must exceed it.
 #: Under an ideal sharp corner the statistic is half χ²(1) and half 0 (r ≥ 0
@@ -298,7 +298,7 @@ def fit_fillet(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, sigma: float, r_ca
     return r, lr, C, t, band, L, taken
 
 
-def _aligned(S: Candidate, other: Candidate, P: np.ndarray, sigma: float, max_angle: float = 6.0) -> Primitive:
+def _aligned(S: SegmentView, other: SegmentView, P: np.ndarray, sigma: float, max_angle: float = 6.0) -> Primitive:
     """S's primitive; a cylinder beside a plane it nearly stands on gets the
     plane's normal as its axis (a boss on a face), its circle refitted.
 
@@ -330,8 +330,7 @@ def _aligned(S: Candidate, other: Candidate, P: np.ndarray, sigma: float, max_an
     return Primitive("cylinder", {"axis_point": cu * e1 + cv * e2, "axis": n, "radius": float(np.sqrt(r2))})
 
 
-def find_fillets(segments: list[Candidate], families: list[Family], ctx: Context, free: np.ndarray,
-                 passes: int = 3) -> int:
+def find_fillets(seg: Segmentation, families: list[Family], ctx: Context, passes: int = 3) -> int:
     """Add the fillets hidden between adjacent segments, in place; returns how many.
 
     See the module docstring. Needs the cylinder family (fillets between two
@@ -340,20 +339,20 @@ def find_fillets(segments: list[Candidate], families: list[Family], ctx: Context
     """
     total = 0
     for _ in range(passes):
-        added = _fillet_pass(segments, families, ctx, free)
+        added = _fillet_pass(seg, families, ctx)
         total += added
         if not added:
             break
     return total
 
 
-def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context, free: np.ndarray) -> int:
+def _fillet_pass(seg: Segmentation, families: list[Family], ctx: Context) -> int:
     by_name = {f.name: f for f in families}
-    if len(segments) < 2 or not ({"cylinder", "torus"} & set(by_name)):
+    if len(seg) < 2 or not ({"cylinder", "torus"} & set(by_name)):
         return 0
     P = ctx.pre.points
     sigma = float(ctx.pre.noise)
-    owner = owners(segments, len(P))
+    owner = seg.owner()
     seg_pts = np.flatnonzero(owner >= 0)
     pairs = cKDTree(P[seg_pts]).query_pairs(ctx.link, output_type="ndarray")
     a, b = owner[seg_pts[pairs[:, 0]]], owner[seg_pts[pairs[:, 1]]]
@@ -369,7 +368,7 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
         nbrs.setdefault(v, set()).add(u)
     # Two faces that a piece of their fillet keeps apart (a strip along its
     # middle, read as a plane) are a corner too, with that piece in it.
-    sizes = np.array([len(s.indices) for s in segments])
+    sizes = seg.sizes()
     bridged = {(u, v) for k, nb in nbrs.items() for u in nb for v in nb
                if u < v and sizes[k] < min(sizes[u], sizes[v]) and v not in nbrs[u]}
     tol = max(2 * ctx.tau, 0.01 * ctx.pre.diagonal)
@@ -377,12 +376,12 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
 
     def tree(k: int) -> cKDTree:
         if k not in trees:
-            trees[k] = cKDTree(P[segments[k].indices])
+            trees[k] = cKDTree(P[seg[k].indices])
         return trees[k]
 
     found = []
     for i, j in adj.tolist() + sorted(bridged):
-        A, B = segments[i], segments[j]
+        A, B = seg[i], seg[j]
         pa, pb = _aligned(A, B, P, sigma), _aligned(B, A, P, sigma)
         sec = section(A.family, pa, B.family, pb, tol)
         if sec is None:
@@ -401,9 +400,9 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
         third = sorted((nbrs.get(i, set()) & nbrs.get(j, set())) - {i, j})
         XS = dS = gS = None
         if third:
-            iS = np.concatenate([segments[k].indices for k in third])
-            gS = np.concatenate([np.full(len(segments[k].indices), k) for k in third])
-            dS = np.concatenate([segments[k].family.distance(segments[k].prim, P[segments[k].indices]) for k in third])
+            iS = np.concatenate([seg[k].indices for k in third])
+            gS = np.concatenate([np.full(len(seg[k].indices), k) for k in third])
+            dS = np.concatenate([seg[k].family.distance(seg[k].prim, P[seg[k].indices]) for k in third])
             XS = sec.to2d(P[iS])
         XA, XB = sec.to2d(P[near_a]), sec.to2d(P[near_b])
         got = fit_fillet(XA, XB, sec.lines, sigma, r_cap=0.2 * ctx.pre.diagonal, XS=XS, dS=dS, gS=gS)
@@ -413,7 +412,7 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
         if lr < LR_MIN or r < 2 * sigma:
             continue
         # The band's points, then the taken pieces' (in XS, they are in label order too).
-        pool = np.r_[np.r_[near_a, near_b][band], *(segments[k].indices for k in taken.tolist())]
+        pool = np.concatenate([np.r_[near_a, near_b][band], *(seg[k].indices for k in taken.tolist())])
         X2 = np.vstack([np.vstack([XA, XB])[band], *([XS[np.isin(gS, taken)]] if len(taken) else [])])
         _, on_arc = profile_distance(X2, C, t, lines[:, :2], r)
         idx = pool[on_arc]
@@ -442,26 +441,22 @@ def _fillet_pass(segments: list[Candidate], families: list[Family], ctx: Context
     for lr, i, j, taken, fam, prim, idx, rest, to_a, close, (sec, C, t, lines, r) in sorted(found, key=lambda f: -f[0]):
         if used & {i, j, *taken}:
             continue
-        keep = [np.setdiff1d(segments[k].indices, idx) for k in (i, j)]
+        keep = [np.setdiff1d(seg[k].indices, idx) for k in (i, j)]
         if min(len(x) for x in keep) < ctx.min_points:
             continue
         keep[0] = np.union1d(keep[0], rest[to_a & close])
         keep[1] = np.union1d(keep[1], rest[~to_a & close])
         for k, x in zip((i, j), keep):
-            segments[k] = replace(segments[k], indices=x)
-        free[rest[~close]] = True
-        free[idx] = False
-        d = fam.distance(prim, P[idx])
+            seg.set_points(k, x)
+        seg.release(rest[~close])
         # Not refitted freely, here or later: on a quarter tube a few σ
         # across, a free torus or cylinder trades its radius for its axis
         # and drifts (minor radius 0.49 for a true 0.28); the tangency to
         # both neighbours pins it.
         arc = Arc(sec, C, t, lines[:, :2].copy(), float(r))
-        segments.append(Candidate(fam, prim, np.sort(idx), mean_fitting_error(d, P[idx]),
-                                  extra={"constrained": True, "arc": arc}))
+        seg.add(SegmentRecord(fam, prim, boundary=arc, fixed=True), np.sort(idx))
         used |= {i, j, *taken}
         drop |= set(taken)
         added += 1
-    if drop:
-        segments[:] = [s for k, s in enumerate(segments) if k not in drop]
+    seg.remove(drop)
     return added

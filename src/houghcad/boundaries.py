@@ -4,30 +4,12 @@ neighbours."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .context import Context
-from .state import Candidate, owners
+from .state import Segmentation, surface_distance
 
-
-def surface_distance(s: Candidate, P: np.ndarray, signed: np.ndarray | None = None) \
-        -> tuple[np.ndarray, np.ndarray | None]:
-    """Distance (m,) of points P (m, 3) to segment s's surface, and which of
-    them s claims outright (bool (m,)) or None. ``signed``: the points'
-    signed distances to s's primitive when the caller has them already.
-
-    A fillet found by :mod:`houghcad.blend` (``extra["arc"]``) is bounded to
-    its arc: the points its rounded corner puts on its faces are at infinity
-    from it, and those it puts on the arc are its own, whatever the faces'
-    unbounded surfaces say there.
-    """
-    arc = s.extra.get("arc")
-    if arc is not None:
-        return arc.distance(P)
-    return (s.family.distance(s.prim, P) if signed is None else np.abs(signed)), None
 
 def _neighbour_owners(owner: np.ndarray, pts: np.ndarray, ctx: Context, reach: float,
                       k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -39,26 +21,23 @@ def _neighbour_owners(owner: np.ndarray, pts: np.ndarray, ctx: Context, reach: f
     nb = np.where(ok, nb, 0)
     return nb, np.where(ok, owner[nb], -1)
 
-def _reassign(segments: list[Candidate], owner: np.ndarray, best: np.ndarray, min_points: int) -> bool:
+
+def _reassign(seg: Segmentation, owner: np.ndarray, best: np.ndarray, min_points: int) -> bool:
     """Move, in place, each point from segment ``owner`` to segment ``best``
     (both (n,), -1: none), except that a segment keeps at least min_points of
     its own. Returns whether any point moved."""
     moved = best != owner
-    left = np.bincount(owner[(owner >= 0) & ~moved], minlength=len(segments))
+    left = np.bincount(owner[(owner >= 0) & ~moved], minlength=len(seg))
     short = moved & (owner >= 0)
     short[short] = left[owner[short]] < min_points
     best = np.where(short, owner, best)
-    moved &= ~short
-    if not moved.any():
+    if not (moved & ~short).any():
         return False
-    for j, s in enumerate(segments):
-        keep = s.indices[best[s.indices] == j]
-        add = np.flatnonzero(moved & (best == j))
-        if len(add) or len(keep) < len(s.indices):
-            segments[j] = replace(s, indices=np.union1d(keep, add))
+    seg.relabel(best)
     return True
 
-def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: float, k: int = 12) -> None:
+
+def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float, k: int = 12) -> None:
     """Give the points that lie on two adjacent segments' surfaces to the smaller one,
     and unsegmented points that lie on an adjacent segment's surface to it.
 
@@ -68,11 +47,11 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
     one a negligible share. ``delta``: distance to a surface that counts as
     on it (standard units).
     """
-    if len(segments) < 2:
+    if len(seg) < 2:
         return
     P = ctx.pre.points
-    owner = owners(segments, len(P))
-    sizes = np.array([len(s.indices) for s in segments])
+    owner = seg.owner()
+    sizes = seg.sizes()
     best = owner.copy()
     best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
     pts = np.arange(len(P))
@@ -88,14 +67,15 @@ def settle_edges(segments: list[Candidate], ctx: Context, delta: float, reach: f
     pairs = np.unique(np.stack([sj, pi], axis=1), axis=0)
     for j in np.unique(pairs[:, 0]):
         cand = pairs[pairs[:, 0] == j, 1]
-        s = segments[j]
+        s = seg[j]
         cand = cand[s.family.distance(s.prim, P[cand]) < delta]
         cand = cand[sizes[j] < best_size[cand]]
         best[cand] = j
         best_size[cand] = sizes[j]
-    _reassign(segments, owner, best, ctx.min_points)
+    _reassign(seg, owner, best, ctx.min_points)
 
-def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k: int = 12,
+
+def settle_noisy_edges(seg: Segmentation, ctx: Context, reach: float, k: int = 12,
                        rounds: int = 8) -> None:
     """Noisy clouds: give each point near a boundary to the adjacent segment
     whose surface is nearest, in place.
@@ -106,17 +86,17 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
     the segments of its neighbours within ``reach``, with the estimated normal
     within the angle tolerance of that surface's) is the likelier face, except
     where a point lies where only one of two faces meeting at an edge reaches
-    (see :func:`_sides`) and near a fillet found by :mod:`houghcad.blend`,
-    whose rounded corner draws its boundaries (see :func:`surface_distance`).
+    (see :func:`_sides`) and near a segment with a ``boundary`` (a fillet's
+    rounded corner draws its boundaries, see :func:`houghcad.state.surface_distance`).
     Each round moves the points next to the current boundary, so the boundary
     walks to where the surfaces cross; a segment keeps at least min_points.
     """
-    if len(segments) < 2:
+    if len(seg) < 2:
         return
     P, N = ctx.pre.points, ctx.pre.normals
     side = None
     for _ in range(rounds):
-        owner = owners(segments, len(P))
+        owner = seg.owner()
         pts = np.flatnonzero(owner >= 0)
         _, other = _neighbour_owners(owner, pts, ctx, reach, k)
         mask = (other >= 0) & (other != owner[pts][:, None])
@@ -124,7 +104,7 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
             return
         pairs = np.unique(np.stack([other[mask], np.broadcast_to(pts[:, None], other.shape)[mask]], 1), axis=0)
         if side is None:
-            side = _sides(segments, np.unique(np.stack([owner[pairs[:, 1]], pairs[:, 0]], 1), axis=0), ctx)
+            side = _sides(seg, np.unique(np.stack([owner[pairs[:, 1]], pairs[:, 0]], 1), axis=0), ctx)
         edge = np.unique(pairs[:, 1])
         best = owner.copy()
         best_d = np.full(len(P), np.inf)
@@ -132,13 +112,13 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
         held = np.zeros(len(P), bool)  # claimed by a fillet's arc (see surface_distance)
         for j in np.unique(owner[edge]):
             e = edge[owner[edge] == j]
-            own_s[e] = segments[j].family.signed_distance(segments[j].prim, P[e])
-            best_d[e], claim = surface_distance(segments[j], P[e], own_s[e])
+            own_s[e] = seg[j].family.signed_distance(seg[j].prim, P[e])
+            best_d[e], claim = surface_distance(seg[j], P[e], own_s[e])
             if claim is not None:
                 held[e[claim & (best_d[e] < ctx.tau)]] = True
         for j in np.unique(pairs[:, 0]):
             cand = pairs[pairs[:, 0] == j, 1]
-            s = segments[j]
+            s = seg[j]
             sn = s.family.surface_normals(s.prim, P[cand])
             sd = s.family.signed_distance(s.prim, P[cand], sn)
             d, claim = surface_distance(s, P[cand], sd)
@@ -157,10 +137,11 @@ def settle_noisy_edges(segments: list[Candidate], ctx: Context, reach: float, k:
                 held[cand[ok]] = True
             best[cand[ok]] = j
             best_d[cand[ok]] = d[ok]
-        if not _reassign(segments, owner, best, ctx.min_points):
+        if not _reassign(seg, owner, best, ctx.min_points):
             return
 
-def _sides(segments: list[Candidate], pairs: np.ndarray, ctx: Context) -> np.ndarray:
+
+def _sides(seg: Segmentation, pairs: np.ndarray, ctx: Context) -> np.ndarray:
     """side[a, b]: the side of b's surface (+1 along its normals, -1, 0
     unclear) on which a's points lie near their contact, for the segment
     pairs (m, 2); an (n, n) int8 array, 0 elsewhere.
@@ -173,13 +154,13 @@ def _sides(segments: list[Candidate], pairs: np.ndarray, ctx: Context) -> np.nda
     3 links of b's that lie clearly off b's surface (beyond tau), by a
     majority of 80 %; both faces' sides must be clear.
     """
-    n = len(segments)
+    n = len(seg)
     P = ctx.pre.points
     side = np.zeros((n, n), np.int8)
     # A wrong primitive (a cylinder across a wall and its two corners) fits
     # clearly worse than the part's faces do, and its sides would spread
     # the error: it keeps the nearer-surface rule.
-    fit = np.array([s.family.distance(s.prim, P[s.indices]).mean() for s in segments])
+    fit = np.array([s.family.distance(s.prim, P[s.indices]).mean() for s in seg])
     sound = fit <= 1.5 * np.median(fit)
     trees: dict[int, cKDTree] = {}
     for a, b in {(int(min(u, v)), int(max(u, v))) for u, v in pairs.tolist() if u != v}:
@@ -187,18 +168,18 @@ def _sides(segments: list[Candidate], pairs: np.ndarray, ctx: Context) -> np.nda
             continue
         for x, y in ((a, b), (b, a)):
             if y not in trees:
-                trees[y] = cKDTree(P[segments[y].indices])
-            Q = P[segments[x].indices]
+                trees[y] = cKDTree(P[seg[y].indices])
+            Q = P[seg[x].indices]
             Q = Q[np.isfinite(trees[y].query(Q, distance_upper_bound=3 * ctx.link)[0])]
             if len(Q) < ctx.min_points:
                 continue
             # Tangent there (a plane and the wide cylinder beside it on one
             # noisy face): no edge, and the nearer surface decides.
-            ny = segments[y].family.surface_normals(segments[y].prim, Q)
-            cos = np.abs(np.einsum("ij,ij->i", segments[x].family.surface_normals(segments[x].prim, Q), ny))
+            ny = seg[y].family.surface_normals(seg[y].prim, Q)
+            cos = np.abs(np.einsum("ij,ij->i", seg[x].family.surface_normals(seg[x].prim, Q), ny))
             if np.median(cos) >= ctx.cos_angle:
                 continue
-            sd = segments[y].family.signed_distance(segments[y].prim, Q, ny)
+            sd = seg[y].family.signed_distance(seg[y].prim, Q, ny)
             sd = sd[np.abs(sd) >= ctx.tau]
             if len(sd) >= ctx.min_points:
                 f = float(np.mean(sd > 0))
@@ -210,7 +191,8 @@ def _sides(segments: list[Candidate], pairs: np.ndarray, ctx: Context) -> np.nda
             side[a, b] = side[b, a] = 0
     return side
 
-def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, reach: float,
+
+def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: float,
                        k: int = 12) -> None:
     """Dissolve, in place, the small segments that their neighbours explain better.
 
@@ -223,17 +205,17 @@ def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, re
     such surface. A narrow true face (a fillet) fits its own points at least
     as well and stays.
     """
-    if len(segments) < 2:
+    if len(seg) < 2:
         return
     P = ctx.pre.points
-    sizes = np.array([len(s.indices) for s in segments])
+    sizes = seg.sizes()
     small = np.flatnonzero(sizes < 3 * ctx.min_points)
     if len(small) == 0:
         return
-    owner = owners(segments, len(P))
+    owner = seg.owner()
     gone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for j in small[np.argsort(sizes[small], kind="stable")]:
-        s = segments[j]
+        s = seg[j]
         idx = s.indices
         _, nb = ctx.pre.tree.query(P[idx], k=min(k, len(P)), distance_upper_bound=reach)
         nb = nb[nb < len(P)]
@@ -241,7 +223,7 @@ def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, re
         adj = [int(a) for a in adj if a >= 0 and a != j and a not in gone and sizes[a] > sizes[j]]
         if not adj:
             continue
-        d = np.stack([segments[a].family.distance(segments[a].prim, P[idx]) for a in adj])
+        d = np.stack([seg[a].family.distance(seg[a].prim, P[idx]) for a in adj])
         near = d.min(axis=0)
         own = s.family.distance(s.prim, P[idx])
         if not (near < delta).all() or near.mean() >= own.mean():
@@ -254,7 +236,5 @@ def dissolve_redundant(segments: list[Candidate], ctx: Context, delta: float, re
         for a in np.unique(to):
             add.setdefault(int(a), []).append(idx[to == a])
     for a, parts in add.items():
-        s = segments[a]
-        segments[a] = replace(s, indices=np.union1d(s.indices, np.concatenate(parts)))
-    for j in sorted(gone, reverse=True):
-        del segments[j]
+        seg.assign(np.concatenate(parts), a)
+    seg.remove(gone)

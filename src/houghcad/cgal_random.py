@@ -22,12 +22,14 @@ _CGAL_RANDOM_GUARD = "_ZGVZN4CGAL18get_default_randomEvE14default_random"
 
 _cgal_warned = False
 
+
 @functools.lru_cache(maxsize=1)
 def _cgal_shape_detection() -> ctypes.CDLL:
     """The bindings' Shape_detection module as a C library (loaded once)."""
     from CGAL import _CGAL_Shape_detection
 
     return ctypes.CDLL(_CGAL_Shape_detection.__file__)
+
 
 def seed_cgal_random(seed: int) -> bool:
     """Put CGAL's default random generator, in the calling thread, in a state

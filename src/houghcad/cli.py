@@ -108,6 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-merge", action="store_true",
                    help="keep segments lying on one surface apart instead of merging them into one "
                    "maximal primitive (groups are found either way)")
+    p.add_argument("--trace", metavar="DIR",
+                   help="also write the labels after every pass of the pipeline, one PLY per pass named "
+                   "NN_PASS.ply, to see where a cloud goes wrong (DIR is created if needed)")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors (and no progress bar)")
     p.set_defaults(func=_cmd_segment)
 
@@ -242,6 +245,22 @@ def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | N
     return written
 
 
+def _trace_writer(directory: Path, points: Any) -> Callable[[int, str, Any], None]:
+    """A ``trace(step, pass_name, state)`` callback writing ``directory/NN_PASS.ply``
+    (the directory is created now, before the run)."""
+    from .io.writers import write_trace_ply
+
+    if directory.exists() and not directory.is_dir():
+        raise InputError(f"{directory}: --trace needs a directory")
+    _make_dir(directory)
+
+    def trace(step: int, name: str, state: Any) -> None:
+        path = directory / f"{step:02d}_{name}.ply"
+        _write(path, lambda p, s: write_trace_ply(p, points, s, name), state)
+
+    return trace
+
+
 def _print(text: str, quiet: bool) -> None:
     if not quiet:
         print(text)
@@ -298,9 +317,12 @@ def _cmd_segment(args: argparse.Namespace) -> int:
         _check_output(path, [inp])
         taken.append(path)
 
+    extra: dict[str, Any] = {}
+    if args.trace:
+        extra["trace"] = _trace_writer(Path(args.trace), cloud.points)
     result = _run_segmentation(
         cloud, families=args.families, epsilon=args.epsilon, seed=args.seed, normals_method=args.normals,
-        quiet=args.quiet, merge=not args.no_merge,
+        quiet=args.quiet, merge=not args.no_merge, **extra,
     )
     _write(out, write_json, result.to_dict())
     written = [out]

@@ -12,12 +12,12 @@ from .adjacency import smooth_adjacency
 from .context import Context
 from .families import Family
 from .families.base import Primitive
-from .growth import grow
+from .growth import accept
 from .recognize import candidates, inliers, recognize
-from .state import Candidate, mean_fitting_error
+from .state import Candidate, SegmentRecord, SegmentView, Segmentation, mean_fitting_error
 
 
-def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate]) -> None:
+def consolidate(seg: Segmentation, families: list[Family], ctx: Context) -> None:
     """Let complex families retake surfaces that simpler ones carved into pieces, in place.
 
     The global round votes only the simple families on the whole cloud; on a
@@ -34,22 +34,23 @@ def consolidate(families: list[Family], ctx: Context, free: np.ndarray, segments
     on each segment fitted clearly worse than the noise
     (:func:`revisit_poor_fits`).
     """
-    if len(segments) < 2:
+    if len(seg) < 2:
         return
     cplx = [f for f in families if not f.simple]
     # Only noise lets simpler families slice a cone or torus in the
     # whole-cloud round (on clean samples evaluate()'s gate rejects slices).
     per_cluster = [f for f in families if f.simple and not f.global_search] if ctx.noisy else []
     if ctx.noisy:
-        revisit_poor_fits(families, ctx, free, segments)
-    _revote_groups(cplx, per_cluster, ctx, free, segments)
-    merge_complex(segments, ctx, free)
+        revisit_poor_fits(seg, families, ctx)
+    _revote_groups(seg, cplx, per_cluster, ctx)
+    merge_complex(seg, ctx)
+
 
 #: Share of a poorly fitted segment that a candidate must explain to replace it.
 DOMINANT = 0.6
 
-def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate],
-                      excess: float = 1.3) -> bool:
+
+def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, excess: float = 1.3) -> bool:
     """On a noisy cloud, vote every family again on each segment whose
     primitive fits it clearly worse than the noise, in place.
 
@@ -82,8 +83,8 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
 
     replaced = False
 
-    for k in sorted(range(len(segments)), key=lambda i: -len(segments[i].indices)):
-        s = segments[k]
+    for k in sorted(range(len(seg)), key=lambda i: -len(seg.indices(i))):
+        s = seg[k]
         if len(s.indices) < 3 * ctx.min_points:
             continue
         own = cost(s, s.indices)
@@ -112,15 +113,14 @@ def revisit_poor_fits(families: list[Family], ctx: Context, free: np.ndarray, se
         mine, theirs = max(cost(c, c.indices), least), max(cost(s, c.indices), least)
         if mine >= (0.5 if c.family.complexity > s.family.complexity else 1.0) * theirs:
             continue
-        free[s.indices] = True
         new = _union(c, [q], P)
-        free[new.indices] = False
-        segments[k] = new
+        seg.set_points(k, new.indices)
+        seg.set_record(k, new.record)
         replaced = True
     return replaced
 
-def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, free: np.ndarray,
-                   segments: list[Candidate]) -> None:
+
+def _revote_groups(seg: Segmentation, cplx: list[Family], per_cluster: list[Family], ctx: Context) -> None:
     """The complex families' and the per-cluster simple families' vote on
     each group of tangent-joined segments (see :func:`consolidate`).
 
@@ -134,11 +134,11 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    n = len(segments)
+    n = len(seg)
     P = ctx.pre.points
     removed = np.zeros(n, bool)
     added: list[Candidate] = []
-    joined = smooth_adjacency(segments, ctx)
+    joined = smooth_adjacency(seg, ctx)
     votes = []
     if cplx:
         # Voted as a whole cloud (ctx.local False): the families' gates skip a
@@ -149,7 +149,7 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
             # Planes and spheres that slice a noisy curved surface meet at
             # creases wider than a face's own normals wander: joined up to
             # the normals' tolerance, they make the group again.
-            votes.append((smooth_adjacency(segments, ctx, crease=ctx.angle), cplx, ctx, False))
+            votes.append((smooth_adjacency(seg, ctx, crease=ctx.angle), cplx, ctx, False))
     if per_cluster:
         # The bands of a noisy cone fit to the noise each, and their fitted
         # normals often disagree at their contacts: after the tangent-joined
@@ -157,7 +157,7 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
         # the faces that dominate what remains are set aside in turn.
         lctx = replace(ctx, local=True)
         votes.append((joined, per_cluster, lctx, True))
-        votes.append((smooth_adjacency(segments, ctx, smooth=False), per_cluster, lctx, True))
+        votes.append((smooth_adjacency(seg, ctx, smooth=False), per_cluster, lctx, True))
     # A wider grouping repeats most groups: each (families, members) is voted
     # once (a vote that took nothing would take nothing again).
     voted: set[tuple[int, ...]] = set()
@@ -172,8 +172,8 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
             voted.add(key)
             if peel:
                 # Segments of these families are whole surfaces already.
-                members = np.array([m for m in members if segments[m].family not in fams], dtype=np.int64)
-            sizes = np.array([len(segments[m].indices) for m in members])
+                members = np.array([m for m in members if seg[m].family not in fams], dtype=np.int64)
+            sizes = np.array([len(seg[m].indices) for m in members])
             # A carved surface is cut into comparable pieces; a face that
             # dominates its group (the plane a torus meets) is not one of them.
             # Where the vote takes nothing, the largest face is set aside too
@@ -186,19 +186,19 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
                     members, sizes = members[keep], sizes[keep]
                 if len(members) < 2 or sizes.max() > 2 / 3 * sizes.sum():
                     break
-                region = np.concatenate([segments[m].indices for m in members])
+                region = np.concatenate([seg[m].indices for m in members])
                 avail = np.zeros(len(P), bool)
                 avail[region] = True
                 took = False
                 for c in recognize(np.sort(region), fams, vctx, avail):
-                    got = _covered(c, [segments[m] for m in members], ctx)
+                    got = _covered(c, [seg[m] for m in members], ctx)
                     got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
                     if peel:
                         # A carved surface is contiguous: the pieces must touch one
                         # another, not only the peeled faces (two opposite holes of
                         # a thin plate lie on one torus through both).
                         got = _touching(got, edges)
-                    if len(got) < 2 or _simple_suffices([segments[m] for m, _, _ in got], ctx):
+                    if len(got) < 2 or _simple_suffices([seg[m] for m, _, _ in got], ctx):
                         continue
                     removed[[m for m, _, _ in got]] = True
                     added.append(_union(c, [q for _, q, _ in got], P))
@@ -209,12 +209,9 @@ def _revote_groups(cplx: list[Family], per_cluster: list[Family], ctx: Context, 
                 keep = np.arange(len(members)) != np.argmax(sizes)
                 members, sizes = members[keep], sizes[keep]
     if added:
-        for m in np.flatnonzero(removed):
-            free[segments[m].indices] = True
-        for c in added:
-            free[c.indices] = False
-        segments[:] = [s for m, s in enumerate(segments) if not removed[m]]
-        segments.extend(grow(c, free, ctx) for c in added)
+        seg.remove(np.flatnonzero(removed))
+        accept(added, seg, ctx)
+
 
 def _touching(got: list, edges: np.ndarray) -> list:
     """The largest set of ``got``'s pieces (position first) connected by ``edges`` (k, 2)."""
@@ -232,7 +229,8 @@ def _touching(got: list, edges: np.ndarray) -> list:
     big = np.bincount(lab).argmax()
     return [g for g, l in zip(got, lab) if l == big]
 
-def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rounds: int = 10) -> None:
+
+def merge_complex(seg: Segmentation, ctx: Context, rounds: int = 10) -> None:
     """Each complex segment, or on a noisy cloud any segment, takes the
     adjacent segments that lie on its surface (a complex one only smaller
     ones), in place.
@@ -254,9 +252,10 @@ def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rou
     tried: set[tuple[int, ...]] = set()  # re-votes done: each configuration once
     for _ in range(rounds):
         grown = False
-        edges = smooth_adjacency(segments, ctx, smooth=False)
-        order = sorted(range(len(segments)), key=lambda i: -len(segments[i].indices))
-        segs: list[Candidate | None] = list(segments)
+        edges = smooth_adjacency(seg, ctx, smooth=False)
+        order = sorted(range(len(seg)), key=lambda i: -len(seg.indices(i)))
+        # Worked on as a list within the round (the ids stay put), written back after.
+        segs: list[SegmentView | Candidate | None] = list(seg)
         for i in order:
             c = segs[i]
             if c is None or (c.family.simple and not ctx.noisy):
@@ -287,22 +286,20 @@ def merge_complex(segments: list[Candidate], ctx: Context, free: np.ndarray, rou
                         continue
                     more = _covered(new, [segs[j] for j in rest], ctx)
                     if more:
-                        free[c.indices] = True
                         c = _union(new, [mine[0][1]], P)
-                        free[c.indices] = False
                         take += [(rest[k], q) for k, q, _ in more]
                     break
             for j, q in take:
-                free[segs[j].indices] = True
                 segs[j] = None
             if take:
                 c = _union(c, [c.indices] + [q for _, q in take], P)
-                free[c.indices] = False
                 grown = True
             segs[i] = c
-        segments[:] = [s for s in segs if s is not None]
+        kept = [s for s in segs if s is not None]
+        seg.rebuild([s.record for s in kept], [s.indices for s in kept])
         if not grown:
             break
+
 
 def _simple_suffices(pieces: list[Candidate], ctx: Context) -> bool:
     """Whether one primitive of the pieces' own (simple) families, refitted on
@@ -319,6 +316,7 @@ def _simple_suffices(pieces: list[Candidate], ctx: Context) -> bool:
         if len(_covered(replace(s, prim=prim), pieces, ctx, strict=False)) == len(pieces):
             return True
     return False
+
 
 def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool = False, strict: bool = True) \
         -> list[tuple[int, np.ndarray, np.ndarray]]:
@@ -351,13 +349,15 @@ def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool 
         out.append((j, Q[ok], d[ok]))
     return out
 
+
 def _union(c: Candidate, parts: list[np.ndarray], P: np.ndarray) -> Candidate:
     """Candidate ``c``'s primitive over the union of the index arrays ``parts``."""
     idx = np.unique(np.concatenate(parts))
     d = c.family.distance(c.prim, P[idx])
-    return Candidate(c.family, c.prim, idx, mean_fitting_error(d, P[idx]), {"d": d})
+    return Candidate(c.family, c.prim, idx, mean_fitting_error(d, P[idx]), d)
 
-def prefer_planes(segments: list[Candidate], families: list[Family], ctx: Context) -> int:
+
+def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> int:
     """On a noisy cloud, give a plane to each curved segment that a plane
     fits as well, in place; returns how many.
 
@@ -368,15 +368,15 @@ def prefer_planes(segments: list[Candidate], families: list[Family], ctx: Contex
     with the plane by MSAC cost over all the segment's points; the plane
     takes the segment unless it is worse by more than two standard errors
     (so does a short arc of a small hole that the noise leaves flat). A
-    fillet found by :mod:`houghcad.blend` keeps its primitive.
+    ``fixed`` primitive (a fillet found by :mod:`houghcad.blend`) stays.
     """
     plane = next((f for f in families if f.name == "plane"), None)
     if plane is None or not ctx.noisy:
         return 0
     P, N = ctx.pre.points, ctx.pre.normals
     changed = 0
-    for k, s in enumerate(segments):
-        if s.family.name not in ("cylinder", "sphere", "torus") or s.extra.get("constrained") or len(s.indices) < 10:
+    for k, s in enumerate(seg):
+        if s.family.name not in ("cylinder", "sphere", "torus") or s.fixed or len(s.indices) < 10:
             continue
         Q = P[s.indices]
         c = Q.mean(axis=0)
@@ -388,7 +388,6 @@ def prefer_planes(segments: list[Candidate], families: list[Family], ctx: Contex
         d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
         if d_pl.mean() > d_own.mean() + 2.0 * d_own.std() / np.sqrt(len(Q)):
             continue
-        d = plane.distance(prim, Q)
-        segments[k] = Candidate(plane, prim, s.indices, mean_fitting_error(d, Q), {"d": d})
+        seg.set_record(k, SegmentRecord(plane, prim))
         changed += 1
     return changed

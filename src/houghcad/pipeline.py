@@ -1,26 +1,276 @@
-"""The whole pipeline: preprocessing, recognition, splitting, refinement, output (paper §5)."""
+"""The whole pipeline (paper §5): preprocessing, a declared list of passes over
+one :class:`~houghcad.state.Segmentation`, and the output.
+
+:data:`PIPELINE` reads top to bottom like the paper: the recognition step on
+the whole cloud (§5.2), the splitting phase on what it leaves (§5.3), then
+our extensions, each labelled as one, and last the association (§5.4), which
+reads the final segments. Every pass takes the state and returns it; each is
+timed under its name in ``Result.timing``, and ``Segmenter(trace=...)``
+(``houghcad segment --trace DIR``) records the labels after each.
+"""
 
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 from . import families as fam_mod
-from .associate import Associator, Item, extent
+from .associate import Associator
 from .blend import find_fillets
-from .errors import InputError
-from .preprocess import preprocess
 from .boundaries import dissolve_redundant, settle_edges, settle_noisy_edges
 from .consolidation import consolidate, prefer_planes, revisit_poor_fits
 from .context import Context
+from .errors import InputError
+from .families import Family
 from .growth import absorb, accept
+from .output import build_segments
+from .preprocess import preprocess
 from .recognize import recognize, refine
-from .result import GROUP_KINDS, Group, Part, Result, Segment
+from .result import Result
 from .splitting import splitting_phase
-from .state import Candidate, mean_fitting_error
+from .state import SegmentRecord, Segmentation, checks_enabled
+
+PAPER_5_2 = "paper §5.2"
+PAPER_5_3 = "paper §5.3"
+PAPER_5_4 = "paper §5.4"
+EXTENSION = "extension"
+
+
+@dataclass(frozen=True)
+class Run:
+    """What the passes read besides the state.
+
+    Attributes
+    ----------
+    ctx : Context
+        Scales and thresholds of the run.
+    families : list of Family
+        The selected families.
+    voted : list of Family
+        Those voted in recognition (a family refining a selected one is
+        offered its base's segments instead, see :func:`refine_pass`).
+    associator : Associator
+    progress : callable
+        ``progress(stage, fraction)``.
+    """
+
+    ctx: Context
+    families: list[Family]
+    voted: list[Family]
+    associator: Associator
+    progress: Callable[[str, float], None] = lambda stage, fraction: None
+
+
+PassFn = Callable[[Segmentation, Run], Segmentation]
+
+
+def _always(ctx: Context) -> bool:
+    return True
+
+
+def _noisy(ctx: Context) -> bool:
+    return ctx.noisy
+
+
+def _clean(ctx: Context) -> bool:
+    return not ctx.noisy
+
+
+@dataclass(frozen=True)
+class Pass:
+    """A named step over the state.
+
+    ``when(ctx)`` decides whether it runs. ``after`` are follow-up passes, run
+    after it (always, or with ``only_if_changed`` only when it wrote to the
+    state); they are timed as ``name.follow_up``.
+    """
+
+    name: str
+    run: PassFn
+    source: str
+    when: Callable[[Context], bool] = _always
+    after: tuple["Pass", ...] = ()
+    only_if_changed: bool = False
+
+
+# ---------------------------------------------------------------------------- the passes
+
+def recognition(seg: Segmentation, run: Run) -> Segmentation:
+    """The families voted on the whole cloud; accepted segments take the
+    points within ε of their primitive (paper §5.2).
+
+    The first round keeps only substantial segments (1 % of the cloud):
+    smaller ones, and the families voted per cluster, are settled in the
+    splitting phase where every family competes for the same points."""
+    ctx = run.ctx
+    gctx = replace(ctx, min_points=max(ctx.min_points, seg.n_points // 100))
+    accept(recognize(np.arange(seg.n_points), run.voted, gctx, seg.free), seg, ctx)
+    return seg
+
+
+def absorb_pass(seg: Segmentation, run: Run) -> Segmentation:
+    """Leftover points join the segment of their nearest assigned neighbour
+    when they lie on its surface."""
+    absorb(seg, run.ctx)
+    return seg
+
+
+def splitting(seg: Segmentation, run: Run) -> Segmentation:
+    """What recognition leaves, clustered and recognised again; CGAL's RANSAC
+    proposes regions where nothing is (paper §5.3)."""
+    n0 = max(int(seg.free.sum()), 1)
+    done = [0]
+
+    def step(n: int) -> None:
+        done[0] += n
+        run.progress("splitting", 0.3 + 0.6 * min(done[0] / n0, 1.0))
+
+    splitting_phase(seg, run.voted, run.ctx, progress=step)
+    return seg
+
+
+def consolidation(seg: Segmentation, run: Run) -> Segmentation:
+    """Complex families retake the surfaces simpler ones carved into pieces;
+    pieces of one surface are voted again together."""
+    consolidate(seg, run.voted, run.ctx)
+    return seg
+
+
+def _on_surface(ctx: Context) -> float:
+    """Distance to a surface that counts as on it (standard units)."""
+    return max(0.3 * ctx.spacing, ctx.tau)
+
+
+def dissolve_pass(seg: Segmentation, run: Run) -> Segmentation:
+    """Slivers that larger neighbours explain better are dissolved into them."""
+    dissolve_redundant(seg, run.ctx, _on_surface(run.ctx), run.ctx.link)
+    return seg
+
+
+def settle_noisy_pass(seg: Segmentation, run: Run) -> Segmentation:
+    """Noisy clouds: edge points go to the adjacent face whose surface is nearest."""
+    settle_noisy_edges(seg, run.ctx, run.ctx.link)
+    return seg
+
+
+def revisit_pass(seg: Segmentation, run: Run) -> Segmentation:
+    """Noisy clouds: settled edges give each segment its whole face; one whose
+    surface the earlier rounds misread now fits it clearly worse than the
+    noise, and every family votes again on it."""
+    revisit_poor_fits(seg, run.voted, run.ctx)
+    return seg
+
+
+def fillets_pass(seg: Segmentation, run: Run) -> Segmentation:
+    """Noisy clouds: fillets shallower than the inlier distance, hidden in
+    their neighbours, are tested between each pair of adjacent segments."""
+    find_fillets(seg, run.families, run.ctx)
+    return seg
+
+
+def prefer_planes_pass(seg: Segmentation, run: Run) -> Segmentation:
+    """Noisy clouds: curved primitives flat within the noise are planes."""
+    prefer_planes(seg, run.families, run.ctx)
+    return seg
+
+
+def settle_edges_pass(seg: Segmentation, run: Run) -> Segmentation:
+    """Clean clouds: the faces' boundary curves lie on both faces; their
+    points go to the smaller one."""
+    settle_edges(seg, run.ctx, _on_surface(run.ctx), run.ctx.link)
+    return seg
+
+
+def refine_pass(seg: Segmentation, run: Run) -> Segmentation:
+    """Families that specialise a recognised one (an annulus: a plane bounded
+    by two circles) take the segments that have their shape."""
+    refine(seg, run.families, run.ctx)
+    return seg
+
+
+def association(seg: Segmentation, run: Run) -> Segmentation:
+    """Maximal primitives and relations between segments (paper §5.4): the
+    segments of one surface become one, with their connected pieces as
+    ``parts``; groups record translations, rotations, reflections, coaxial
+    and parallel sets."""
+    a = run.associator.fit(list(seg), run.ctx.pre, run.ctx.tau, run.ctx.link)
+    seg.rebuild([SegmentRecord(it.family, it.prim, fixed=it.fixed) for it in a.items_],
+                [it.indices for it in a.items_])
+    seg.parts = [list(it.parts) for it in a.items_]
+    seg.groups = list(a.groups_)
+    return seg
+
+
+ABSORB = Pass("absorb", absorb_pass, EXTENSION)
+SETTLE_NOISY = Pass("settle_noisy_edges", settle_noisy_pass, EXTENSION)
+ASSOCIATION = Pass("association", association, PAPER_5_4)
+
+#: The passes in order. Association comes last: it reads the final segments.
+PIPELINE: tuple[Pass, ...] = (
+    Pass("recognition", recognition, PAPER_5_2, after=(ABSORB,)),
+    Pass("splitting", splitting, PAPER_5_3),
+    Pass("consolidation", consolidation, EXTENSION, after=(ABSORB,)),
+    Pass("dissolve_redundant", dissolve_pass, EXTENSION),
+    Pass("settle_noisy_edges", settle_noisy_pass, EXTENSION, when=_noisy),
+    Pass("revisit_poor_fits", revisit_pass, EXTENSION, when=_noisy, after=(ABSORB, SETTLE_NOISY),
+         only_if_changed=True),
+    Pass("fillets", fillets_pass, EXTENSION, when=_noisy, after=(ABSORB, SETTLE_NOISY), only_if_changed=True),
+    Pass("prefer_planes", prefer_planes_pass, EXTENSION, when=_noisy),
+    Pass("settle_edges", settle_edges_pass, EXTENSION, when=_clean),
+    Pass("refine", refine_pass, EXTENSION),
+    ASSOCIATION,
+)
+
+#: ``trace(step, name, state)``: called after every pass that ran.
+TraceFn = Callable[[int, str, Segmentation], None]
+
+
+@dataclass
+class _Runner:
+    """Runs passes in order, timing each and tracing the state after it."""
+
+    run: Run
+    timing: dict[str, float] = field(default_factory=dict)
+    trace: TraceFn | None = None
+    check: bool = False
+    step: int = 0
+
+    def __call__(self, p: Pass, seg: Segmentation, prefix: str = "") -> Segmentation:
+        if not p.when(self.run.ctx):
+            return seg
+        name = prefix + p.name
+        self.run.progress(name, min(0.1 + 0.85 * self.step / len(PIPELINE), 0.95))
+        before = seg.version
+        t = time.perf_counter()
+        seg = p.run(seg, self.run)
+        self.timing[name] = self.timing.get(name, 0.0) + time.perf_counter() - t
+        self.step += 1
+        if self.check:
+            seg.check()
+        if self.trace is not None:
+            self.trace(self.step, name, seg)
+        if p.after and (seg.version != before or not p.only_if_changed):
+            for q in p.after:
+                seg = self(q, seg, name + ".")
+        return seg
+
+
+def _monotonic(progress: Callable[[str, float], None] | None) -> Callable[[str, float], None]:
+    """``progress`` with fractions that never go back (passes after the
+    splitting phase report below where its own progress reached)."""
+    if progress is None:
+        return lambda stage, fraction: None
+    last = [0.0]
+
+    def report(stage: str, fraction: float) -> None:
+        last[0] = max(last[0], float(fraction))
+        progress(stage, last[0])
+
+    return report
 
 
 class Segmenter:
@@ -28,7 +278,7 @@ class Segmenter:
 
     Parameters
     ----------
-    families : str or list of str
+    families : str or list of str or Family
         ``"simple"`` (plane, cylinder, cone, sphere, torus), ``"all"``, or names.
     epsilon : float, optional
         Removal threshold ε as a fraction of the bounding-box diagonal
@@ -50,17 +300,29 @@ class Segmenter:
     association : dict, optional
         Options of :class:`houghcad.associate.Associator` (``angle_tol``,
         ``length_tol``, ``relative_tol``, ``extent_tol``, ``contact``).
+    trace : str, path or callable, optional
+        A folder: the labels after every pass are written there as a PLY per
+        pass (see :func:`houghcad.io.writers.write_trace_ply`). A callable:
+        called as ``trace(step, pass_name, state)``.
+    check : bool, optional
+        Check the state's invariants after every pass (default: when
+        ``$HOUGHCAD_CHECK`` is set).
 
     Attributes
     ----------
     result_ : Result
         Set by :meth:`fit`.
+    segmentation_ : Segmentation
+        The final state (standard frame), set by :meth:`fit`.
+    context_ : Context
+        The run's scales and thresholds, set by :meth:`fit`.
     """
 
     def __init__(self, families="simple", epsilon: float | None = None, normals_method: str = "auto",
                  persistence: float = 0.1, min_points: int | None = None, seed: int = 0,
                  progress: Callable[[str, float], None] | None = None, merge: bool = True,
-                 association: dict[str, Any] | None = None):
+                 association: dict[str, Any] | None = None, trace: str | Path | TraceFn | None = None,
+                 check: bool | None = None):
         self.families = families
         self.epsilon = epsilon
         self.normals_method = normals_method
@@ -70,12 +332,21 @@ class Segmenter:
         self.progress = progress
         self.merge = merge
         self.association = association
+        self.trace = trace
+        self.check = check
 
     def get_options(self) -> dict[str, Any]:
-        return {"families": self.families if isinstance(self.families, str) else list(self.families),
+        fams = self.families
+        return {"families": fams if isinstance(fams, str) else [getattr(f, "name", f) for f in fams],
                 "epsilon": self.epsilon, "normals_method": self.normals_method,
                 "persistence": self.persistence, "min_points": self.min_points, "seed": self.seed,
                 "merge": bool(self.merge), "association": dict(self.association or {})}
+
+    def _associator(self, merge: bool, options: dict[str, Any] | None) -> Associator:
+        try:
+            return Associator(merge=bool(merge), **(options or {}))
+        except TypeError as exc:
+            raise InputError(f"association options: {exc}") from None
 
     def fit(self, points: np.ndarray, normals: np.ndarray | None = None, source: str | None = None) -> "Segmenter":
         """Segment ``points`` (n, 3), world units; ``normals`` (n, 3) optional."""
@@ -90,111 +361,66 @@ class Segmenter:
             raise InputError(f"epsilon must be a fraction of the diagonal in (0, 0.5), got {self.epsilon}")
         if not (0 < float(self.persistence) < 1):
             raise InputError(f"persistence must be in (0, 1), got {self.persistence}")
-        try:
-            associator = Associator(merge=bool(self.merge), **(self.association or {}))
-        except TypeError as exc:
-            raise InputError(f"association options: {exc}") from None
+        associator = self._associator(self.merge, self.association)
         fams = fam_mod.select(self.families)
         # A family refining a selected one is not voted: it would tie with its
         # base family, which wins ties; the base's segments are offered to it
-        # after recognition instead (see ``refine`` below).
+        # after recognition instead (see ``refine_pass``).
         names = {f.name for f in fams}
         voted = [f for f in fams if f.refines not in names]
-        timing: dict[str, float] = {}
-        report = self.progress or (lambda stage, frac: None)
+        report = _monotonic(self.progress)
 
         t0 = time.perf_counter()
         report("preprocess", 0.0)
         pre = preprocess(points, normals, method=self.normals_method, seed=self.seed)
-        timing["preprocess"] = time.perf_counter() - t0
-
         ctx = self._context(pre, len(points))
-        free = np.ones(len(points), dtype=bool)
-        segments: list[Candidate] = []
-
-        t1 = time.perf_counter()
-        report("recognition", 0.1)
-        # The first round keeps only substantial segments: smaller ones, and the
-        # families voted per cluster, are settled in the splitting phase where
-        # every family competes for the same points.
-        gctx = replace(ctx, min_points=max(ctx.min_points, len(points) // 100))
-        found = recognize(np.arange(len(points)), voted, gctx, free)
-        accept(found, free, ctx, segments)
-        absorb(segments, free, ctx)
-        timing["recognition"] = time.perf_counter() - t1
-
-        t2 = time.perf_counter()
-        n0 = max(int(free.sum()), 1)
-        done = [0]
-
-        def step(n):
-            done[0] += n
-            report("splitting", 0.3 + 0.6 * min(done[0] / n0, 1.0))
-
-        splitting_phase(voted, ctx, free, segments, progress=step)
-        consolidate(voted, ctx, free, segments)
-        absorb(segments, free, ctx)
-        delta = max(0.3 * pre.spacing, ctx.tau)
-        dissolve_redundant(segments, ctx, delta, ctx.link)
-        if ctx.noisy:
-            settle_noisy_edges(segments, ctx, ctx.link)
-            # Settled edges give each segment its whole face: one whose
-            # surface the earlier rounds misread (a generalised cylinder on a
-            # band of a cone) now fits it clearly worse than the noise.
-            if revisit_poor_fits(voted, ctx, free, segments):
-                absorb(segments, free, ctx)
-                settle_noisy_edges(segments, ctx, ctx.link)
-            # Fillets shallower than the inlier distance hide in their neighbours.
-            if find_fillets(segments, fams, ctx, free):
-                absorb(segments, free, ctx)
-                settle_noisy_edges(segments, ctx, ctx.link)
-            # Curved primitives flat within the noise are planes.
-            prefer_planes(segments, fams, ctx)
-        else:
-            # On CAD samples the faces' boundary curves lie on both faces.
-            settle_edges(segments, ctx, delta, ctx.link)
-        # Families that specialise a recognised one (annulus: a plane bounded
-        # by two circles) take the segments that have their shape.
-        refine(segments, fams, ctx)
-        timing["splitting"] = time.perf_counter() - t2
-
-        self._recognised = (segments, pre, ctx, points, source, dict(timing), t0)
-        self.result_ = self._associate(associator, report)
+        run = Run(ctx, fams, voted, associator, report)
+        runner = _Runner(run, {"preprocess": time.perf_counter() - t0}, self._tracer(points),
+                         checks_enabled() if self.check is None else bool(self.check))
+        seg = Segmentation(len(points))
+        for p in PIPELINE:
+            if p is ASSOCIATION:
+                self._before_association = (seg.copy(), run, dict(runner.timing), points, source)
+            seg = runner(p, seg)
+        self.context_ = ctx
+        self.result_ = self._result(seg, run, runner.timing, points, source)
         report("done", 1.0)
         return self
 
     def reassociate(self, merge: bool | None = None, association: dict[str, Any] | None = None) -> Result:
-        """Run the association step again on the segments of the last :meth:`fit`
+        """Run the association again on the segments of the last :meth:`fit`
         with other options (cheap: recognition is not repeated); returns a new Result."""
-        if not hasattr(self, "_recognised"):
+        if not hasattr(self, "_before_association"):
             raise RuntimeError("call fit() first")
+        seg, run, timing, points, source = self._before_association
         merge = self.merge if merge is None else merge
-        try:
-            associator = Associator(merge=bool(merge), **(association if association is not None
-                                                          else (self.association or {})))
-        except TypeError as exc:
-            raise InputError(f"association options: {exc}") from None
-        return self._associate(associator, lambda stage, frac: None)
+        run = replace(run, associator=self._associator(merge, association if association is not None
+                                                       else self.association), progress=lambda s, f: None)
+        runner = _Runner(run, dict(timing))
+        return self._result(runner(ASSOCIATION, seg.copy()), run, runner.timing, points, source)
 
-    def _associate(self, associator: Associator, report) -> Result:
-        segments, pre, ctx, points, source, timing, t0 = self._recognised
-        timing = dict(timing)
-        t3 = time.perf_counter()
-        report("association", 0.92)
-        associator.fit(segments, pre, ctx.tau, ctx.link)
-        timing["association"] = time.perf_counter() - t3
-
-        t4 = time.perf_counter()
-        report("output", 0.96)
-        out, groups = self._output(associator.items_, associator.groups_, pre, points)
-        timing["output"] = time.perf_counter() - t4
+    def _result(self, seg: Segmentation, run: Run, timing: dict[str, float], points: np.ndarray,
+                source: str | None) -> Result:
+        self.segmentation_ = seg
+        t = time.perf_counter()
+        run.progress("output", 0.96)
+        out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed)
+        timing = {**timing, "output": time.perf_counter() - t}
         timing["total"] = sum(v for k, v in timing.items() if k != "total")
-        assigned = np.zeros(len(points), bool)
-        for s in out:
-            assigned[s.indices] = True
-        options = {**self.get_options(), "merge": bool(associator.merge), "normals_used": pre.normals_method}
-        return Result(n_points=len(points), segments=out, unsegmented=np.flatnonzero(~assigned),
-                      timing=timing, options=options, source=source, groups=groups)
+        options = {**self.get_options(), "merge": bool(run.associator.merge),
+                   "normals_used": run.ctx.pre.normals_method}
+        unsegmented = np.flatnonzero(seg.labels < 0).astype(np.int64)
+        return Result(n_points=len(points), segments=out, unsegmented=unsegmented, timing=timing,
+                      options=options, source=source, groups=groups)
+
+    def _tracer(self, points: np.ndarray) -> TraceFn | None:
+        if self.trace is None or callable(self.trace):
+            return self.trace
+        from .io.writers import write_trace_ply
+
+        folder = Path(self.trace)
+        folder.mkdir(parents=True, exist_ok=True)
+        return lambda step, name, seg: write_trace_ply(folder / f"{step:02d}_{name}.ply", points, seg, name)
 
     def _context(self, pre, n: int) -> Context:
         s = pre.spacing
@@ -210,68 +436,6 @@ class Segmenter:
                        min_points=int(mp), max_radius=1.0, persistence=float(self.persistence),
                        min_votes=float(mp), seed=int(self.seed))
 
-    def _output(self, items: list[Item], raw_groups, pre, points: np.ndarray) -> tuple[list[Segment], list[Group]]:
-        """Refit every segment (and part) on its own points, map it to world
-        coordinates, and renumber the groups' members."""
-        T = pre.transform
-        order = sorted(range(len(items)), key=lambda k: (-len(items[k].indices), int(items[k].indices[0])))
-        new_id = {k: i for i, k in enumerate(order)}
-        # Final refits may reach any radius below 1e9 (standard units).
-        check = Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0, max_radius=1e9)
-        rng = np.random.default_rng(self.seed)
-
-        def fitted(fam, prim0, idx, fixed=False):
-            P, N = pre.points[idx], pre.normals[idx]
-            sel = np.arange(len(P)) if len(P) <= 4000 else np.sort(rng.choice(len(P), 4000, replace=False))
-            prim = None if fixed else fam.fit(prim0, P[sel], N[sel])
-            if prim is None or not fam.valid(prim, check):
-                prim = prim0
-            mfe = mean_fitting_error(fam.distance(prim, P) / T.scale, points[idx])
-            return fam.to_world(prim, T), mfe
-
-        out: list[Segment] = []
-        for k in order:
-            it = items[k]
-            params, mfe = fitted(it.family, it.prim, it.indices, it.fixed)
-            parts = []
-            if len(it.parts) > 1:
-                for p in sorted(it.parts, key=lambda a: (-len(a), int(a[0]))):
-                    pp, pm = fitted(it.family, it.prim, p)
-                    parts.append(Part(indices=p.astype(np.int64), params=pp, mfe=pm))
-            desc = _world_descriptors(it.family, it.family.descriptors(it.prim), T)
-            frame = it.family.frame(it.prim)
-            axis = T.inv_dirs(frame.direction) if frame is not None and frame.direction is not None else None
-            desc["extent"] = extent(points[it.indices], axis).tolist()
-            out.append(Segment(id=len(out), type=it.family.name, indices=it.indices.astype(np.int64),
-                               params=params, mfe=mfe, parts=parts, descriptors=desc))
-        groups = []
-        for g in raw_groups:
-            fam = items[g.members[0]].family
-            groups.append(Group(kind=g.kind, members=sorted(new_id[m] for m in g.members),
-                                descriptors=_world_descriptors(fam, g.descriptors, T)))
-        groups.sort(key=lambda g: (GROUP_KINDS.index(g.kind), g.members))
-        return out, groups
-
-
-
-
-
-def _world_descriptors(fam, d: dict[str, Any], T) -> dict[str, Any]:
-    """Descriptors from the standard frame to world units and axes."""
-    out: dict[str, Any] = {}
-    for k, v in d.items():
-        if k in fam.length_descriptors or k == "extent":
-            out[k] = (np.asarray(v, float) / T.scale).tolist() if np.ndim(v) else T.inv_length(v)
-        elif k in ("axis", "normal", "mirror_normal"):
-            out[k] = T.inv_dirs(np.asarray(v, float)).tolist()
-        elif k in ("axis_point", "mirror_point"):
-            out[k] = T.inv_points(np.asarray(v, float)).tolist()
-        elif isinstance(v, (np.floating, np.integer)):
-            out[k] = v.item()
-        else:
-            out[k] = v
-    return out
-
 
 def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="simple",
             epsilon: float | None = None, seed: int = 0, normals_method: str = "auto",
@@ -285,7 +449,8 @@ def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="
         World coordinates.
     normals : ndarray, shape (n, 3), optional
     families, epsilon, seed, normals_method, progress, merge
-        See :class:`Segmenter` (``**options`` too: persistence, min_points, association).
+        See :class:`Segmenter` (``**options`` too: persistence, min_points,
+        association, trace, check).
     source : str, optional
         Name of the input, used in messages and in the result.
 

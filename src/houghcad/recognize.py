@@ -19,7 +19,7 @@ from sklearn.cluster import DBSCAN
 from .context import Context
 from .families import Family, Primitive
 from .hough import accumulate, persistent_peaks, smooth
-from .state import Candidate, mean_fitting_error
+from .state import Candidate, SegmentRecord, Segmentation, mean_fitting_error
 
 
 #: Peaks evaluated per placement for a complex (non-simple) family.
@@ -27,6 +27,7 @@ COMPLEX_MAX_PEAKS = 6
 
 #: Peaks a stacked family adds from the votes off its top peak's surface (see :func:`_beside_top`).
 BESIDE_TOP_PEAKS = 2
+
 
 def dense_subsets(P: np.ndarray, link: float, min_points: int) -> list[np.ndarray]:
     """Connected dense subsets of P (n, 3): DBSCAN components of at least min_points."""
@@ -45,6 +46,7 @@ def dense_subsets(P: np.ndarray, link: float, min_points: int) -> list[np.ndarra
         out.append(np.sort(order[lo:hi]))
     return out
 
+
 def inliers(fam: Family, prim: Primitive, P: np.ndarray, N: np.ndarray, tau: float, cos_angle: float):
     """Boolean mask of the points within ``tau`` with a compatible normal, and the distances."""
     d = fam.distance(prim, P)
@@ -55,8 +57,10 @@ def inliers(fam: Family, prim: Primitive, P: np.ndarray, N: np.ndarray, tau: flo
         ok[near] = np.abs(np.einsum("ij,ij->i", sn, N[near])) >= cos_angle
     return ok, d
 
+
 def _subsample(n: int, m: int, rng: np.random.Generator) -> np.ndarray:
     return np.arange(n) if n <= m else np.sort(rng.choice(n, m, replace=False))
+
 
 def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse: float) -> list[Candidate]:
     """Candidate evaluation on the point set ``idx`` (global indices).
@@ -130,8 +134,9 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
         # another family or the per-cluster rounds explain exactly.
         if not ctx.local and d[loc].mean() > max(2.0 * ctx.pre.noise, 0.1 * ctx.tau):
             continue
-        out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X), {"d": d[loc]}))
+        out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X), d[loc]))
     return out
+
 
 def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive, float]]:
     """Peaks of the family's accumulators on the point set ``idx``: coarse
@@ -164,6 +169,7 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
                 out.append((prim, fam.coarse_tolerance(grid, Pl, ctx)))
     return out
 
+
 def _beside_top(fam: Family, pl, grid, H: np.ndarray, pk: np.ndarray, P: np.ndarray, Pl: np.ndarray,
                 voter: np.ndarray, vals: np.ndarray, ctx: Context) -> np.ndarray:
     """Flat indices (k,) of the local maxima of the accumulator ``H`` whose
@@ -191,6 +197,7 @@ def _beside_top(fam: Family, pl, grid, H: np.ndarray, pk: np.ndarray, P: np.ndar
     again, _ = persistent_peaks(H2, ctx.persistence * top / H2.max(), grid.wrap)
     return again[np.isin(again, near) & (H2.ravel()[again] >= ctx.min_votes)]
 
+
 def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     """Point-wise competition: a point stays with a candidate only if no other
     candidate explains it clearly better (by more than a quarter of tau).
@@ -198,7 +205,7 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     if len(cands) < 2:
         return cands
     pts = np.concatenate([c.indices for c in cands])
-    d = np.concatenate([c.extra["d"] for c in cands])
+    d = np.concatenate([c.distances for c in cands])
     dmin = np.full(len(ctx.pre.points), np.inf)
     np.minimum.at(dmin, pts, d)
     # On a noisy cloud some candidate among dozens passes through almost any
@@ -215,17 +222,19 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
         if k.all():
             out.append(c)
             continue
-        idx, dd = c.indices[k], c.extra["d"][k]
+        idx, dd = c.indices[k], c.distances[k]
         for comp in dense_subsets(ctx.pre.points[idx], ctx.link, ctx.min_points):
             out.append(Candidate(c.family, c.prim, idx[comp],
-                                 mean_fitting_error(dd[comp], ctx.pre.points[idx[comp]]), {"d": dd[comp]}))
+                                 mean_fitting_error(dd[comp], ctx.pre.points[idx[comp]]), dd[comp]))
     return out
+
 
 #: Share of its points a selected candidate must still hold free to be accepted.
 KEEP_SHARE = 0.6
 
-def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candidate]:
-    """Greedy choice among competing candidates.
+
+def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Candidate]:
+    """Greedy choice among competing candidates for the points ``avail`` (bool (n,)) leaves.
 
     After the point-wise competition, largest first; a candidate competes with
     the others that share more than 1 − ``KEEP_SHARE`` of the smaller one's
@@ -234,7 +243,7 @@ def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candi
     one clearly).
     """
     cands = compete(cands, ctx)
-    free = free.copy()
+    free = avail.copy()
     judged = _noise_floored(cands, ctx)
     order = sorted(range(len(cands)), key=lambda i: (-len(cands[i].indices), cands[i].mfe))
     done = np.zeros(len(cands), bool)
@@ -264,13 +273,14 @@ def select(cands: list[Candidate], free: np.ndarray, ctx: Context) -> list[Candi
             if j == best or inter > 0.5 * min(len(sets[best]), len(sets[j])):
                 done[j] = True
         c = cands[best]
-        avail = c.indices[free[c.indices]]
-        if len(avail) < max(ctx.min_points, KEEP_SHARE * len(c.indices)):
+        left = c.indices[free[c.indices]]
+        if len(left) < max(ctx.min_points, KEEP_SHARE * len(c.indices)):
             continue
-        c = replace(c, indices=avail)
-        free[avail] = False
+        c = replace(c, indices=left)
+        free[left] = False
         accepted.append(c)
     return accepted
+
 
 def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     """The candidates as selection compares them: on a noisy cloud, by their
@@ -287,7 +297,7 @@ def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     """
     if not ctx.noisy or not cands:
         return cands
-    md = np.array([float(c.extra["d"].mean()) if len(c.extra.get("d", ())) else 0.0 for c in cands])
+    md = np.array([float(c.distances.mean()) if len(c.distances) else 0.0 for c in cands])
     size = np.array([len(c.indices) for c in cands])
     big = (size >= 0.9 * size.max()) & (md > 0)
     floor = min(0.8 * ctx.pre.noise, float(md[big].min()) if big.any() else np.inf)
@@ -301,6 +311,7 @@ def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
         least = floor * min(0.05, 1.5 / np.sqrt(max(n, 1)))
         out.append(replace(c, mfe=c.mfe * max(m - floor, least) / m))
     return out
+
 
 def _better(a: Candidate, b: Candidate) -> bool:
     """Whether candidate a should replace b for the same points."""
@@ -321,18 +332,18 @@ def _better(a: Candidate, b: Candidate) -> bool:
         len(cplx.indices) >= 1.5 * len(simple.indices) and cplx.mfe <= 1.25 * simple.mfe)
     return (a is cplx) == cplx_wins
 
-def recognize(idx: np.ndarray, families: list[Family], ctx: Context, free: np.ndarray) -> list[Candidate]:
-    """One recognition step on the points ``idx`` (global indices).
 
-    Returns the accepted candidates; their points are still marked free in
-    ``free`` (the caller removes them).
-    """
-    return select(candidates(idx, families, ctx, free), free, ctx)
+def recognize(idx: np.ndarray, families: list[Family], ctx: Context, avail: np.ndarray) -> list[Candidate]:
+    """One recognition step on the points of ``idx`` (global indices) that
+    ``avail`` (bool (n,)) leaves: the selected candidates, disjoint (the
+    caller takes their points)."""
+    return select(candidates(idx, families, ctx, avail), avail, ctx)
 
-def candidates(idx: np.ndarray, families: list[Family], ctx: Context, free: np.ndarray) -> list[Candidate]:
-    """Every family's evaluated candidates on the free points of ``idx``
-    (global indices), before selection."""
-    idx = idx[free[idx]]
+
+def candidates(idx: np.ndarray, families: list[Family], ctx: Context, avail: np.ndarray) -> list[Candidate]:
+    """Every family's evaluated candidates on the points of ``idx`` (global
+    indices) that ``avail`` (bool (n,)) leaves, before selection."""
+    idx = idx[avail[idx]]
     if len(idx) < ctx.min_points:
         return []
     k = min(10, len(idx))
@@ -350,7 +361,8 @@ def candidates(idx: np.ndarray, families: list[Family], ctx: Context, free: np.n
             cands.extend(evaluate(fam, prim, idx, ctx, coarse))
     return cands
 
-def refine(segments: list[Candidate], families: list[Family], ctx: Context) -> None:
+
+def refine(seg: Segmentation, families: list[Family], ctx: Context) -> None:
     """Offer every segment to the selected families that refine its family
     (:attr:`Family.refines`), in place: the first that accepts takes the
     segment, points unchanged. Selection cannot make that choice, since both
@@ -361,11 +373,10 @@ def refine(segments: list[Candidate], families: list[Family], ctx: Context) -> N
             by_base.setdefault(f.refines, []).append(f)
     if not by_base:
         return
-    for k, c in enumerate(segments):
+    for k, c in enumerate(seg):
         for f in by_base.get(c.family.name, ()):
             P = ctx.pre.points[c.indices]
             prim = f.refine(c.prim, P, ctx.pre.normals[c.indices], ctx)
             if prim is not None and f.valid(prim, ctx):
-                d = f.distance(prim, P)
-                segments[k] = Candidate(f, prim, c.indices, mean_fitting_error(d, P), {"d": d})
+                seg.set_record(k, SegmentRecord(f, prim))
                 break

@@ -11,6 +11,7 @@ parameters.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Callable
 
 import numpy as np
 from sklearn.cluster import DBSCAN
@@ -22,7 +23,7 @@ from .growth import absorb, accept
 from .preprocess import rotation_to_z
 from .ransac import ransac_pieces
 from .recognize import dense_subsets, recognize, select
-from .state import Candidate, mean_fitting_error, owners
+from .state import Candidate, Segmentation, mean_fitting_error
 
 
 def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.ndarray]:
@@ -34,39 +35,40 @@ def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.nda
     out = [c for c in out if len(c) >= ctx.min_points]
     return sorted(out, key=lambda c: (-len(c), int(c[0])))
 
-def splitting_phase(families: list[Family], ctx: Context, free: np.ndarray, segments: list[Candidate],
-                    max_rounds: int = 6, progress=None) -> None:
-    """Iterate DBSCAN clustering + recognition on what is left, in place."""
+
+def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context, max_rounds: int = 6,
+                    progress: Callable[[int], None] | None = None) -> None:
+    """Iterate DBSCAN clustering + recognition on what is left, in place.
+    ``progress(n)`` is called after each cluster of n points."""
     lctx = replace(ctx, local=True)
     for _ in range(max_rounds):
-        rest = np.flatnonzero(free)
+        rest = np.flatnonzero(seg.free)
         found_any = False
         for cl in clusters(rest, ctx):
-            cl = cl[free[cl]]
+            avail = seg.free
+            cl = cl[avail[cl]]
             if len(cl) < ctx.min_points:
                 continue
-            found = recognize(cl, families, lctx, free)
+            found = recognize(cl, families, lctx, avail)
             if not found:
-                found = coaxial_bands(cl, families, segments, free, lctx)
+                found = coaxial_bands(cl, families, seg, lctx)
             if not found and len(cl) >= 3 * ctx.min_points:
                 for piece in ransac_pieces(cl, ctx):
-                    got = recognize(piece, families, lctx, free)
-                    for c in got:  # hide from the next pieces; accept() below takes them
-                        free[c.indices] = False
+                    got = recognize(piece, families, lctx, avail)
+                    for c in got:  # hidden from the next pieces
+                        avail[c.indices] = False
                     found += got
-                for c in found:
-                    free[c.indices] = True
-            accept(found, free, ctx, segments)
+            accept(found, seg, ctx)
             found_any |= bool(found)
             if found:
-                absorb(segments, free, ctx)
+                absorb(seg, ctx)
             if progress is not None:
                 progress(len(cl))
         if not found_any:
             break
 
-def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candidate], free: np.ndarray,
-                  ctx: Context) -> list[Candidate]:
+
+def coaxial_bands(cl: np.ndarray, families: list[Family], seg: Segmentation, ctx: Context) -> list[Candidate]:
     """Cylinders about the axes of the adjacent segments, for a cluster the
     normals could not place.
 
@@ -80,10 +82,10 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candida
     that lie on the cylinder (one free row alone does not fix a tilt).
     """
     cyl = next((f for f in families if f.name == "cylinder"), None)
-    if cyl is None or not segments or len(cl) < ctx.min_points:
+    if cyl is None or not len(seg) or len(cl) < ctx.min_points:
         return []
     P = ctx.pre.points
-    owner = owners(segments, len(P))
+    owner = seg.labels
     k = min(12, len(P))
     dist, nb = ctx.pre.tree.query(P[cl], k=k, distance_upper_bound=ctx.link)
     nb = nb[np.isfinite(dist)]
@@ -91,8 +93,8 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candida
     adj = adj[adj >= 0]
     border = np.unique(nb[owner[nb] >= 0])
     axes: list[np.ndarray] = []
-    for j in adj:
-        fr = segments[j].family.frame(segments[j].prim)
+    for j in adj.tolist():
+        fr = seg.records[j].family.frame(seg.records[j].prim)
         if fr is None or fr.direction is None:
             continue
         a = np.asarray(fr.direction, float)
@@ -126,5 +128,5 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], segments: list[Candida
             sel = cl[ok]
             for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
                 out.append(Candidate(cyl, prim, sel[comp], mean_fitting_error(d[ok][comp], P[sel[comp]]),
-                                     {"d": d[ok][comp]}))
-    return select(out, free, ctx)
+                                     d[ok][comp]))
+    return select(out, seg.free, ctx)

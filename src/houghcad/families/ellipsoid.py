@@ -396,7 +396,6 @@ def covered_by_simple(fam: Family, prim: Primitive, P: np.ndarray, ctx) -> bool:
     return any(e <= 1.05 * d_cplx + 0.05 * ctx.tau for e in errs.values())
 
 
-
 def _mostly_on(fit, P: np.ndarray, delta: float, share: float = 0.5) -> bool:
     """Whether at least ``share`` of the points P (n, 3) lie within ``delta``
     (Sampson distance) of the fitted ellipsoid ``fit`` = (centre, axes, semi-axes)."""

@@ -18,7 +18,8 @@ from typing import IO, Any
 
 import numpy as np
 
-__all__ = ["atomic_write", "write_json", "write_fit4cad_primitives", "write_points_ply", "write_result_ply"]
+__all__ = ["atomic_write", "write_json", "write_fit4cad_primitives", "write_points_ply", "write_result_ply",
+           "write_trace_ply"]
 
 
 @contextlib.contextmanager
@@ -152,6 +153,7 @@ def write_points_ply(
     fields: Mapping[str, np.ndarray] | None = None,
     colors: np.ndarray | None = None,
     binary: bool = True,
+    comments: Sequence[str] = (),
 ) -> None:
     """Write points (and per-point attributes) as a PLY ``vertex`` element, atomically.
 
@@ -169,6 +171,8 @@ def write_points_ply(
         (clipped); floating arrays as 0-1 (scaled by 255, rounded, clipped).
     binary : bool
         Binary little-endian (default) or ascii PLY.
+    comments : sequence of str
+        Header comment lines (one line each).
     """
     from plyfile import PlyData, PlyElement
 
@@ -197,7 +201,8 @@ def write_points_ply(
     vertex = np.empty(n, dtype=[(name, arr.dtype.str.replace(">", "<")) for name, arr in columns])
     for name, arr in columns:
         vertex[name] = arr
-    ply = PlyData([PlyElement.describe(vertex, "vertex")], text=not binary, byte_order="<")
+    ply = PlyData([PlyElement.describe(vertex, "vertex")], text=not binary, byte_order="<",
+                  comments=[c.replace("\n", " ") for c in comments])
     with atomic_write(path, "wb") as f:
         ply.write(f)
 
@@ -228,6 +233,24 @@ def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: A
         raise ValueError(f"points must have shape ({result.n_points}, 3), got {pts.shape}")
     fields = {"segment": result.labels(), "type": point_type_codes(result), "group": result.group_labels()}
     write_points_ply(path, pts, fields=fields, colors=point_colors(result, "segment"))
+
+
+def write_trace_ply(path: str | os.PathLike[str], points: np.ndarray, seg: Any, pass_name: str) -> None:
+    """Write the labels of a segmentation state after one pass, atomically.
+
+    ``points`` (N, 3) are the input's (world coordinates); ``seg`` a
+    :class:`houghcad.state.Segmentation`. The ``vertex`` element has
+    ``x y z``, ``segment`` (-1 free) and ``type`` (family code, -1 free)
+    and colours by type; the header comment names the pass.
+    """
+    from ..palette import UNSEGMENTED_COLOR, UNSEGMENTED_CODE, type_code, type_color
+
+    lab = np.asarray(seg.labels, dtype=np.int64)
+    names = [r.family.name for r in seg.records]
+    codes = np.array([type_code(t) for t in names] + [UNSEGMENTED_CODE], dtype=np.int32)
+    colors = np.array([type_color(t) for t in names] + [UNSEGMENTED_COLOR], dtype=np.uint8)
+    write_points_ply(path, points, fields={"segment": lab, "type": codes[lab]}, colors=colors[lab],
+                     comments=[f"houghcad pass {pass_name}", f"segments {len(names)}"])
 
 
 def _colors_to_uint8(colors: np.ndarray, n: int) -> np.ndarray:

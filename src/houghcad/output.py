@@ -1,0 +1,86 @@
+"""From the final segmentation (standard frame) to a :class:`~houghcad.result.Result`
+in the input's coordinates: each segment and part refitted on its own
+points, mapped to world units, with its mean fitting error (eq. (1))."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .associate import RawGroup, extent
+from .context import Context
+from .families import Family
+from .families.base import Primitive
+from .preprocess import Preprocessed, Similarity
+from .result import GROUP_KINDS, Group, Part, Segment
+from .state import Segmentation, mean_fitting_error
+
+#: Points per final refit: beyond this the parameters no longer move.
+MAX_REFIT_POINTS = 4000
+
+
+def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed, points: np.ndarray,
+                   seed: int) -> tuple[list[Segment], list[Group]]:
+    """The output segments (largest first) and groups, world coordinates.
+
+    ``seg`` holds the associated segments with their parts
+    (:attr:`Segmentation.parts`); ``points`` (n, 3) are the input's.
+    """
+    T = pre.transform
+    order = sorted(range(len(seg)), key=lambda k: (-len(seg.indices(k)), int(seg.indices(k)[0])))
+    new_id = {k: i for i, k in enumerate(order)}
+    # Final refits may reach any radius below 1e9 (standard units).
+    check = Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0, max_radius=1e9)
+    rng = np.random.default_rng(seed)
+
+    def fitted(fam: Family, prim0: Primitive, idx: np.ndarray, fixed: bool = False) -> tuple[dict, float]:
+        P, N = pre.points[idx], pre.normals[idx]
+        sel = np.arange(len(P)) if len(P) <= MAX_REFIT_POINTS else \
+            np.sort(rng.choice(len(P), MAX_REFIT_POINTS, replace=False))
+        prim = None if fixed else fam.fit(prim0, P[sel], N[sel])
+        if prim is None or not fam.valid(prim, check):
+            prim = prim0
+        mfe = mean_fitting_error(fam.distance(prim, P) / T.scale, points[idx])
+        return fam.to_world(prim, T), mfe
+
+    out: list[Segment] = []
+    for k in order:
+        r, idx = seg.records[k], seg.indices(k)
+        params, mfe = fitted(r.family, r.prim, idx, r.fixed)
+        parts = []
+        pieces = seg.parts[k] if seg.parts is not None else [idx]
+        if len(pieces) > 1:
+            for p in sorted(pieces, key=lambda a: (-len(a), int(a[0]))):
+                pp, pm = fitted(r.family, r.prim, p)
+                parts.append(Part(indices=p.astype(np.int64), params=pp, mfe=pm))
+        desc = world_descriptors(r.family, r.family.descriptors(r.prim), T)
+        frame = r.family.frame(r.prim)
+        axis = T.inv_dirs(frame.direction) if frame is not None and frame.direction is not None else None
+        desc["extent"] = extent(points[idx], axis).tolist()
+        out.append(Segment(id=len(out), type=r.family.name, indices=idx.astype(np.int64),
+                           params=params, mfe=mfe, parts=parts, descriptors=desc))
+    out_groups = []
+    for g in groups:
+        fam = seg.records[g.members[0]].family
+        out_groups.append(Group(kind=g.kind, members=sorted(new_id[m] for m in g.members),
+                                descriptors=world_descriptors(fam, g.descriptors, T)))
+    out_groups.sort(key=lambda g: (GROUP_KINDS.index(g.kind), g.members))
+    return out, out_groups
+
+
+def world_descriptors(fam: Family, d: dict[str, Any], T: Similarity) -> dict[str, Any]:
+    """Descriptors from the standard frame to world units and axes."""
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        if k in fam.length_descriptors or k == "extent":
+            out[k] = (np.asarray(v, float) / T.scale).tolist() if np.ndim(v) else T.inv_length(v)
+        elif k in ("axis", "normal", "mirror_normal"):
+            out[k] = T.inv_dirs(np.asarray(v, float)).tolist()
+        elif k in ("axis_point", "mirror_point"):
+            out[k] = T.inv_points(np.asarray(v, float)).tolist()
+        elif isinstance(v, (np.floating, np.integer)):
+            out[k] = v.item()
+        else:
+            out[k] = v
+    return out

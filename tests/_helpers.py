@@ -1,0 +1,48 @@
+"""Helpers shared by the tests of the pipeline modules."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from houghcad.context import Context
+from houghcad.families import REGISTRY
+from houghcad.families.base import Primitive
+from houghcad.pipeline import Segmenter
+from houghcad.preprocess import preprocess
+from houghcad.state import Candidate, Segmentation, mean_fitting_error
+
+
+def context(points: np.ndarray, seed: int = 0, **options) -> Context:
+    """The run context ``Segmenter(**options)`` derives for ``points`` (n, 3)."""
+    pre = preprocess(points, seed=seed)
+    return Segmenter(seed=seed, **options)._context(pre, len(points))
+
+
+def seed_plane(P: np.ndarray) -> Primitive:
+    """The PCA plane of points P (n, 3)."""
+    c = P.mean(axis=0)
+    n = np.linalg.eigh(np.cov((P - c).T))[1][:, 0]
+    return Primitive("plane", {"normal": n, "offset": float(n @ c), "point": c})
+
+
+def plane_candidate(ctx: Context, idx: np.ndarray) -> Candidate:
+    """A plane fitted to the points ``idx`` of the context's cloud, as a candidate."""
+    fam = REGISTRY["plane"]
+    P = ctx.pre.points[idx]
+    prim = fam.fit(seed_plane(P), P, ctx.pre.normals[idx])
+    d = fam.distance(prim, P)
+    return Candidate(fam, prim, idx, mean_fitting_error(d, P), d)
+
+
+def state_before(points: np.ndarray, pass_name: str, **options) -> tuple[Segmentation | None, Context]:
+    """The state just before the pass ``pass_name`` of a run on ``points`` (None
+    when the pass did not run; an empty state for the first), and its context."""
+    states: dict[str, Segmentation] = {}
+    last = [Segmentation(len(points))]
+
+    def trace(step: int, name: str, seg: Segmentation) -> None:
+        states.setdefault(name, last[0])
+        last[0] = seg.copy()
+
+    fitted = Segmenter(trace=trace, **options).fit(points)
+    return states.get(pass_name), fitted.context_

@@ -1,0 +1,149 @@
+"""Boundaries between adjacent segments: edge settling (clean and noisy) and dissolving slivers."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+import houghcad
+from _helpers import context, plane_candidate, state_before
+from houghcad import synth
+from houghcad.boundaries import _sides, dissolve_redundant, settle_edges, settle_noisy_edges
+from houghcad.families import REGISTRY
+from houghcad.families.base import Primitive
+from houghcad.state import Candidate, Segmentation
+
+
+def test_settle_edges_gives_shared_boundary_points_to_the_smaller_segment():
+    cloud = synth.PARTS["plate_with_holes"](seed=0, n_points=12000, noise=0.0)
+    seg, ctx = state_before(cloud.points, "association", seed=0)
+    pre = ctx.pre
+    delta = max(0.3 * pre.spacing, ctx.tau)
+    big = int(np.argmax(seg.sizes()))
+    B = seg[big]
+    # Rim points of smaller segments that also lie on the biggest one's surface.
+    moved = {}
+    for j, s in enumerate(seg):
+        if j == big:
+            continue
+        on = s.indices[B.family.distance(B.prim, pre.points[s.indices]) < delta]
+        if len(on) and len(s.indices) - len(on) >= ctx.min_points:
+            moved[j] = on
+    assert moved, "the plate's holes share their rims with the face"
+    # Hand them to the big segment, as the first acceptance would.
+    seg.assign(np.concatenate(list(moved.values())), big)
+    settle_edges(seg, ctx, delta, ctx.link)
+    seg.check()
+    for j, on in moved.items():
+        assert (seg.labels[on] == j).all()
+    assert seg.sizes().min() >= ctx.min_points
+
+
+def test_edge_sliver_is_dissolved_into_the_faces_it_lies_on():
+    # Seed 3: rim points of the shaft whose blurred normals kept them out of
+    # both faces got a 9-point cylinder of their own, fitted worse than the
+    # shaft and the end plane fit them.
+    cloud = synth.shaft_with_groove(seed=3, n_points=12000)
+    res = houghcad.segment(cloud.points, seed=0, merge=False)
+    shaft = next(k for k, p in enumerate(cloud.primitives) if p["name"] == "shaft")
+    for s in res.segments:
+        ids, counts = np.unique(cloud.labels[s.indices], return_counts=True)
+        if ids[np.argmax(counts)] == shaft:
+            assert len(s.indices) > 1000, [(x.type, len(x.indices)) for x in res.segments]
+
+
+def test_dissolve_keeps_true_faces_however_small_the_threshold_calls_them():
+    # Every face of the part, the narrow groove walls included, lies off its
+    # neighbours' surfaces: even when all count as small, only fragments of a
+    # face beside a larger piece of it go, and every face keeps a segment.
+    cloud = synth.shaft_with_groove(seed=3, n_points=12000)
+    seg, ctx = state_before(cloud.points, "association", seed=0)
+
+    def faces():
+        return sorted(int(np.bincount(cloud.labels[s.indices][cloud.labels[s.indices] >= 0]).argmax())
+                      for s in seg)
+
+    before = faces()
+    assert len(set(before)) == len(cloud.primitives)
+    dissolve_redundant(seg, replace(ctx, min_points=10 ** 6), max(0.3 * ctx.spacing, ctx.tau), ctx.link)
+    seg.check()
+    assert set(faces()) == set(before)
+    assert len(seg) >= len(before) - (len(before) - len(set(before)))
+
+
+def _two_faces(seed: int = 0):
+    cloud = synth.PARTS["block_with_hole_and_slot"](seed=seed, n_points=12000, noise=0.005)
+    ctx = context(cloud.points)
+    names = [p["name"] for p in cloud.primitives]
+    big = np.flatnonzero(cloud.labels == names.index("box -z"))
+    small = np.flatnonzero(cloud.labels == names.index("box -x"))
+    return cloud, ctx, big, small
+
+
+def test_noisy_edge_band_goes_back_to_the_face_it_lies_nearest():
+    # Two noisy faces of a block meeting at an edge; the smaller one has
+    # grown a band ε wide into the larger, as acceptance and growth leave it.
+    cloud, ctx, big, small = _two_faces()
+    assert ctx.noisy
+    S = plane_candidate(ctx, small)
+    P = ctx.pre.points
+    band = big[S.family.distance(S.prim, P[big]) < ctx.epsilon]
+    assert len(band) > 0.05 * len(big)
+    seg = Segmentation.of(len(P), [plane_candidate(ctx, np.setdiff1d(big, band)),
+                                   replace(S, indices=np.union1d(small, band))])
+    before = np.isin(band, seg.indices(1)).sum()
+    settle_noisy_edges(seg, ctx, ctx.link)
+    seg.check()
+    wrong = np.isin(band, seg.indices(1)).sum() + np.isin(small, seg.indices(0)).sum()
+    # What stays wrong is the noise's own ambiguity: points scattered nearer
+    # the other face's plane than their own.
+    truth = [plane_candidate(ctx, big), plane_candidate(ctx, small)]
+    d = [t.family.distance(t.prim, P[np.union1d(band, small)]) for t in truth]
+    ambiguous = np.sum(np.where(np.isin(np.union1d(band, small), band), d[1] < d[0], d[0] < d[1]))
+    assert wrong <= max(1.5 * ambiguous, 0.05 * before)
+    assert seg.sizes().sum() == len(big) + len(small)
+
+
+def test_noisy_points_beyond_a_convex_edge_stay_with_the_face_that_reaches_there():
+    # Two noisy box faces at a convex edge, split where their planes are
+    # nearer (the old rule's fixed point). A point scattered beyond the edge,
+    # on the far side of one face's plane from the other face, is that other
+    # face's: the first does not reach there. Over three seeds the side rule
+    # leaves 75 of the nearest rule's 102 wrong points (it moved none before).
+    wrong, wrong_nearest = 0, 0
+    for seed in range(3):
+        cloud, ctx, big, small = _two_faces(seed)
+        truth = [plane_candidate(ctx, big), plane_candidate(ctx, small)]
+        both = np.union1d(big, small)
+        d = np.stack([t.family.distance(t.prim, ctx.pre.points[both]) for t in truth])
+        near = d.argmin(axis=0)
+        seg = Segmentation.of(len(cloud.points), [replace(truth[0], indices=both[near == 0]),
+                                                  replace(truth[1], indices=both[near == 1])])
+        wrong_nearest += np.isin(big, seg.indices(1)).sum() + np.isin(small, seg.indices(0)).sum()
+        settle_noisy_edges(seg, ctx, ctx.link)
+        wrong += np.isin(big, seg.indices(1)).sum() + np.isin(small, seg.indices(0)).sum()
+        assert seg.sizes().sum() == len(both)
+    assert wrong <= 0.8 * wrong_nearest
+
+
+def test_sides_of_two_faces_at_an_edge_and_of_a_plane_and_a_wide_cylinder():
+    cloud, ctx, big, small = _two_faces()
+    n_pts = len(cloud.points)
+    bottom, wall = plane_candidate(ctx, big), plane_candidate(ctx, small)
+    side = _sides(Segmentation.of(n_pts, [bottom, wall]), np.array([[0, 1]]), ctx)
+    # Each face lies on the side of the other's plane where its middle is.
+    P = ctx.pre.points
+    c0, c1 = P[bottom.indices].mean(axis=0), P[wall.indices].mean(axis=0)
+    assert side[0, 1] == np.sign(wall.family.signed_distance(wall.prim, c0[None])[0]) != 0
+    assert side[1, 0] == np.sign(bottom.family.signed_distance(bottom.prim, c1[None])[0]) != 0
+    # A wide cylinder tangent to the bottom face, on part of it: no edge there.
+    n = bottom.prim.params["normal"]
+    e = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+    e /= np.linalg.norm(e)
+    R = 50.0 * ctx.pre.diagonal
+    cyl = Primitive("cylinder", {"axis_point": c0 + R * n, "axis": e, "radius": R})
+    half = bottom.indices[(P[bottom.indices] - c0) @ np.cross(n, e) > 0]
+    piece = Candidate(REGISTRY["cylinder"], cyl, half, 0.0, np.zeros(len(half)))
+    rest = replace(bottom, indices=np.setdiff1d(bottom.indices, half))
+    assert not _sides(Segmentation.of(n_pts, [rest, piece]), np.array([[0, 1]]), ctx).any()
