@@ -9,7 +9,7 @@ from .context import Context
 from .state import Segmentation
 
 
-def smooth_adjacency(seg: Segmentation, ctx: Context, k: int = 8, smooth: bool = True,
+def smooth_adjacency(seg: Segmentation, ctx: Context, smooth: bool = True,
                      crease: float | None = None) -> np.ndarray:
     """Pairs (m, 2) of segments that meet along a tangent-continuous boundary.
 
@@ -17,11 +17,12 @@ def smooth_adjacency(seg: Segmentation, ctx: Context, k: int = 8, smooth: bool =
     in the other; the contact is smooth where the two primitives' normals at
     those points agree within the angle tolerance (the fitted surfaces', not
     the estimated normals, which blur across a crease) for most contacts.
-    A pair needs at least √(points of the smaller) / 3 contact points, and 3:
+    A pair needs √(points of the smaller) / ``contact_divisor`` contact points, and ``contact_min``:
     a boundary, not a corner. ``smooth=False``: any such contact. ``crease``
     (radians): the angle within which normals agree (default: half the
-    angle tolerance).
+    angle tolerance, ``crease_angles``).
     """
+    t = ctx.tol.adjacency
     if len(seg) < 2:
         return np.zeros((0, 2), np.int64)
     P = ctx.pre.points
@@ -30,7 +31,7 @@ def smooth_adjacency(seg: Segmentation, ctx: Context, k: int = 8, smooth: bool =
     for s in seg:
         sn[s.indices] = s.family.surface_normals(s.prim, P[s.indices])
     pts = np.flatnonzero(owner >= 0)
-    nb, other = _neighbour_owners(owner, pts, ctx, ctx.link, k)
+    nb, other = _neighbour_owners(owner, pts, ctx, ctx.link, t.neighbours)
     mine = owner[pts][:, None]
     cos = np.abs(np.einsum("ij,ikj->ik", sn[pts], sn[nb]))
     mask = (other >= 0) & (other != mine)
@@ -45,10 +46,11 @@ def smooth_adjacency(seg: Segmentation, ctx: Context, k: int = 8, smooth: bool =
     # between two faces is still a crease).
     key = np.unique(pair * len(P) + pi)
     pair_u, count = np.unique(key // len(P), return_counts=True)
-    agree = cos[mask] >= np.cos(0.5 * ctx.angle if crease is None else crease)
+    agree = cos[mask] >= np.cos(t.crease_angles * ctx.angle if crease is None else crease)
     share = np.bincount(np.searchsorted(pair_u, pair), weights=agree, minlength=len(pair_u)) / \
         np.bincount(np.searchsorted(pair_u, pair), minlength=len(pair_u))
     sizes = seg.sizes()
     u, v = pair_u // n, pair_u % n
-    keep = ((share >= 0.5) | (not smooth)) & (count >= np.maximum(3, np.sqrt(np.minimum(sizes[u], sizes[v])) / 3))
+    least = np.maximum(t.contact_min, np.sqrt(np.minimum(sizes[u], sizes[v])) / t.contact_divisor)
+    keep = ((share >= t.smooth_share) | (not smooth)) & (count >= least)
     return np.stack([u[keep], v[keep]], axis=1)

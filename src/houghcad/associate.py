@@ -40,10 +40,19 @@ from scipy.spatial import cKDTree
 
 from .families.base import Family, Frame, Primitive, regular_indices, unit
 from .state import SegmentView
+from .tolerances import AssociationTolerances
 
 __all__ = ["Associator", "Item", "RawGroup", "extent", "pivot"]
 
-_MAX_FIT = 4000  # points per refit: beyond this the parameters no longer move
+#: Extents span the central share of the points between these percentiles: a
+#: few edge points a segment took from its neighbour do not change them.
+EXTENT_PERCENTILES = (2.5, 97.5)
+#: Points an extent is computed on at most (a regular subsample).
+EXTENT_POINTS = 2000
+#: Stands for an infinite dissimilarity in the linkage.
+_FAR = 1e9
+#: Guards a division by a zero span.
+_TINY = 1e-12
 
 
 @dataclass
@@ -86,17 +95,17 @@ def extent(P: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
     if len(P) < 2:
         return np.zeros(3)
     Q = P - P.mean(axis=0)
-    Qs = Q[:: max(1, len(Q) // 2000)]
+    Qs = Q[:: max(1, len(Q) // EXTENT_POINTS)]
     if direction is None:
         _, _, vt = np.linalg.svd(Qs, full_matrices=False)
-        lo, hi = np.percentile(Qs @ vt.T, [2.5, 97.5], axis=0)
+        lo, hi = np.percentile(Qs @ vt.T, EXTENT_PERCENTILES, axis=0)
         return np.sort(hi - lo)[::-1]
     a = unit(np.asarray(direction, float))
     h = Qs @ a
     across = Qs - np.outer(h, a)
     _, _, vt = np.linalg.svd(across, full_matrices=False)
-    lo, hi = np.percentile(across @ vt[:2].T, [2.5, 97.5], axis=0)
-    h_lo, h_hi = np.percentile(h, [2.5, 97.5])
+    lo, hi = np.percentile(across @ vt[:2].T, EXTENT_PERCENTILES, axis=0)
+    h_lo, h_hi = np.percentile(h, EXTENT_PERCENTILES)
     return np.concatenate([[h_hi - h_lo], np.sort(hi - lo)[::-1]])
 
 
@@ -143,7 +152,7 @@ def _complete_linkage(D: np.ndarray) -> np.ndarray:
     n = len(D)
     if n == 1:
         return np.zeros(1, dtype=np.int64)
-    D = np.minimum(np.nan_to_num(D, nan=1e9, posinf=1e9), 1e9)
+    D = np.minimum(np.nan_to_num(D, nan=_FAR, posinf=_FAR), _FAR)
     iu = np.triu_indices(n, 1)
     Z = linkage(D[iu], method="complete")
     return fcluster(Z, t=1.0, criterion="distance").astype(np.int64) - 1
@@ -168,22 +177,12 @@ class Associator:
     merge : bool
         Merge segments of one primitive into a maximal primitive. Without it
         the raw segments stay and ``same_primitive`` groups list them.
-    angle_tol : float
-        Largest angle between parallel axes or normals, and between equal
-        half-angles, degrees.
-    length_tol : float, optional
-        Largest difference between equal lengths (radii, offsets, axis
-        distances), a fraction of the cloud's diagonal. Default: from the
-        inlier threshold, at least 0.2 % of the diagonal.
-    relative_tol : float
-        Lengths may also differ by this fraction of their value.
-    extent_tol : float
-        Extents are equal within this fraction of their value (and at least
-        2 % of the diagonal): they come from the points, not from a fit.
-    contact : float
-        Adjacent pieces of one surface become one part when each has at
-        least ``contact`` × √(points of the smaller piece) points touching
-        the other: a shared boundary, not a corner.
+    tol : AssociationTolerances, optional
+        The thresholds (:class:`houghcad.tolerances.AssociationTolerances`:
+        ``angle_tol``, ``length_tol``, ``relative_tol``, ``extent_tol``,
+        ``contact`` ...).
+    **options
+        Fields of ``tol`` to set, e.g. ``contact=0.5``.
 
     Attributes (after :meth:`fit`)
     ----------
@@ -191,14 +190,10 @@ class Associator:
     groups_ : list of RawGroup
     """
 
-    def __init__(self, merge: bool = True, angle_tol: float = 2.0, length_tol: float | None = None,
-                 relative_tol: float = 0.02, extent_tol: float = 0.1, contact: float = 0.3):
+    def __init__(self, merge: bool = True, tol: AssociationTolerances | None = None, **options: float | None):
         self.merge = merge
-        self.contact = contact
-        self.angle_tol = angle_tol
-        self.length_tol = length_tol
-        self.relative_tol = relative_tol
-        self.extent_tol = extent_tol
+        # Unknown options raise TypeError, as unknown keyword arguments do.
+        self.tol = replace(tol or AssociationTolerances(), **options)
 
     # ------------------------------------------------------------------ entry point
     def fit(self, cands: list[SegmentView], pre, tau: float, link: float) -> "Associator":
@@ -209,10 +204,11 @@ class Associator:
         """
         self._pre, self._tau = pre, float(tau)
         diag = float(pre.diagonal)
-        self._L = (self.length_tol * diag if self.length_tol is not None
-                   else max(0.002 * diag, 0.5 * self._tau))
-        self._A = np.radians(self.angle_tol)
-        self._E = 0.02 * diag
+        t = self.tol
+        self._L = (t.length_tol * diag if t.length_tol is not None
+                   else max(t.length_floor * diag, t.length_taus * self._tau))
+        self._A = np.radians(t.angle_tol)
+        self._E = t.extent_floor * diag
         # Parts are compared by their final least-squares fits: the recognition
         # fits of small segments can be a degree or two off.
         cands = [c if c.fixed else replace(c, prim=self._refit(c.family, c.prim, np.sort(c.indices)))
@@ -258,7 +254,7 @@ class Associator:
 
     def _refit(self, fam: Family, prim: Primitive, idx: np.ndarray) -> Primitive:
         """Least-squares fit on (a deterministic subsample of) the points idx."""
-        sel = idx[regular_indices(len(idx), _MAX_FIT)]
+        sel = idx[regular_indices(len(idx), self.tol.refit_points)]
         try:
             out = fam.fit(prim, self._pre.points[sel], self._pre.normals[sel])
         except (np.linalg.LinAlgError, ValueError):
@@ -300,7 +296,7 @@ class Associator:
         for u, v, c in zip(lo.tolist(), hi.tolist(), count.tolist()):
             least[(u, v)] = min(least.get((u, v), c), c)
         return {(u, v) for (u, v), c in least.items()
-                if c >= self.contact * np.sqrt(min(sizes[u], sizes[v]))}
+                if c >= self.tol.contact * np.sqrt(min(sizes[u], sizes[v]))}
 
     def _parts(self, members: list[int], adjacency: set[tuple[int, int]]) -> list[list[int]]:
         """Connected components of members under adjacency (lists of members)."""
@@ -322,7 +318,7 @@ class Associator:
         """Tolerance on a shape descriptor: lengths L plus a relative part, angles A,
         integers exact."""
         if key in fam.length_descriptors:
-            return L + self.relative_tol * max(abs(a), abs(b))
+            return L + self.tol.relative_tol * max(abs(a), abs(b))
         if key in fam.integer_descriptors:
             return 0.5
         return A
@@ -354,7 +350,7 @@ class Associator:
         for k, c in enumerate(cands):
             by_family.setdefault(c.family.name, []).append(k)
         # Proposals are generous (a part's own fit may be loose); the union refit decides.
-        Lp, Ap = 4.0 * self._L, 3.0 * self._A
+        Lp, Ap = self.tol.propose_lengths * self._L, self.tol.propose_angles * self._A
         for name, ks in by_family.items():
             if len(ks) == 1:
                 out.append(ks)
@@ -380,7 +376,7 @@ class Associator:
                 trial = acc + [m]
                 idx = np.concatenate([cands[t].indices for t in trial])
                 prim = self._refit(fam, cands[acc[0]].prim, idx)
-                if all(self._mean_residual(fam, prim, cands[t].indices) <= self._own[t] + 0.5 * self._tau
+                if all(self._mean_residual(fam, prim, cands[t].indices) <= self._own[t] + self.tol.verify_taus * self._tau
                        for t in trial):
                     acc.append(m)
                     rest.remove(m)
@@ -398,7 +394,7 @@ class Associator:
         # An axis fitted on a piece of length h is known to about (length
         # tolerance) / h radians: short holes get a looser angle tolerance.
         span = [e[0] if f is not None and f.kind != "plane" else e[2] for f, e in zip(frames, ext)]
-        self._unc = [np.arctan2(2.0 * self._L, max(h, 1e-12)) for h in span]
+        self._unc = [np.arctan2(self.tol.axis_lengths * self._L, max(h, _TINY)) for h in span]
         groups: list[RawGroup] = []
 
         # Congruent segments: one family, equal shape descriptors and extents.
@@ -411,7 +407,7 @@ class Associator:
             fam = items[ks[0]].family
 
             def congruence(i, j):
-                tol_e = np.maximum(self._E, self.extent_tol * np.maximum(ext[i], ext[j]))
+                tol_e = np.maximum(self._E, self.tol.extent_tol * np.maximum(ext[i], ext[j]))
                 return max(self._shape_distance(fam, shapes[i], shapes[j], self._L, self._A),
                            float(np.max(np.abs(ext[i] - ext[j]) / tol_e)))
 
@@ -430,7 +426,7 @@ class Associator:
             def off_axis(i, j):
                 f, g = frames[i], frames[j]
                 return max(_angle(f.direction, g.direction, False) / self._atol(i, j),
-                           _line_distance(f.anchor, f.direction, g.anchor, g.direction) / (2.0 * self._L))
+                           _line_distance(f.anchor, f.direction, g.anchor, g.direction) / (self.tol.coaxial_lengths * self._L))
 
             D = _pairwise(axial, off_axis)
             for cl in _clusters(D):
@@ -490,7 +486,7 @@ class Associator:
         normal along the line joining their pivots' centroids, through its middle."""
         c1 = np.mean([piv[m] for m in s1], axis=0)
         c2 = np.mean([piv[m] for m in s2], axis=0)
-        if np.linalg.norm(c2 - c1) < 2.0 * self._L:
+        if np.linalg.norm(c2 - c1) < self.tol.mirror_lengths * self._L:
             return None
         m = unit(c2 - c1)
         mid = 0.5 * (c1 + c2)
@@ -505,7 +501,7 @@ class Associator:
         for k in s1:
             if _angle(reflect_dir(frames[k].direction), d2, oriented) > max(self._atol(k, j) for j in s2):
                 return None
-        tol = 2.0 * self._L
+        tol = self.tol.mirror_lengths * self._L
         for a, b in ((s1, s2), (s2, s1)):
             for k in a:
                 p = reflect_pt(piv[k])

@@ -37,7 +37,7 @@ def _reassign(seg: Segmentation, owner: np.ndarray, best: np.ndarray, min_points
     return True
 
 
-def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float, k: int = 12) -> None:
+def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) -> None:
     """Give the points that lie on two adjacent segments' surfaces to the smaller one,
     and unsegmented points that lie on an adjacent segment's surface to it.
 
@@ -55,7 +55,7 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float, k:
     best = owner.copy()
     best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
     pts = np.arange(len(P))
-    _, other = _neighbour_owners(owner, pts, ctx, reach, k)
+    _, other = _neighbour_owners(owner, pts, ctx, reach, ctx.tol.boundaries.neighbours)
     # Pairs (point, adjacent smaller segment), each once; unsegmented points
     # count as owned by an infinitely large segment.
     mask = (other >= 0) & (other != owner[pts][:, None])
@@ -75,8 +75,7 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float, k:
     _reassign(seg, owner, best, ctx.min_points)
 
 
-def settle_noisy_edges(seg: Segmentation, ctx: Context, reach: float, k: int = 12,
-                       rounds: int = 8) -> None:
+def settle_noisy_edges(seg: Segmentation, ctx: Context, reach: float) -> None:
     """Noisy clouds: give each point near a boundary to the adjacent segment
     whose surface is nearest, in place.
 
@@ -95,10 +94,10 @@ def settle_noisy_edges(seg: Segmentation, ctx: Context, reach: float, k: int = 1
         return
     P, N = ctx.pre.points, ctx.pre.normals
     side = None
-    for _ in range(rounds):
+    for _ in range(ctx.tol.boundaries.noisy_rounds):
         owner = seg.owner()
         pts = np.flatnonzero(owner >= 0)
-        _, other = _neighbour_owners(owner, pts, ctx, reach, k)
+        _, other = _neighbour_owners(owner, pts, ctx, reach, ctx.tol.boundaries.neighbours)
         mask = (other >= 0) & (other != owner[pts][:, None])
         if not mask.any():
             return
@@ -151,9 +150,10 @@ def _sides(seg: Segmentation, pairs: np.ndarray, ctx: Context) -> np.ndarray:
     of b from a's face, is a's only if its foot on b would fall outside b's
     face, where b has no points; a nearest-surface rule gives it to b
     whenever b's surface is nearer. The side is read on a's points within
-    3 links of b's that lie clearly off b's surface (beyond tau), by a
-    majority of 80 %; both faces' sides must be clear.
+    ``side_links`` links of b's that lie clearly off b's surface (beyond
+    tau), by a majority of ``side_majority``; both faces' sides must be clear.
     """
+    t = ctx.tol.boundaries
     n = len(seg)
     P = ctx.pre.points
     side = np.zeros((n, n), np.int8)
@@ -161,7 +161,7 @@ def _sides(seg: Segmentation, pairs: np.ndarray, ctx: Context) -> np.ndarray:
     # clearly worse than the part's faces do, and its sides would spread
     # the error: it keeps the nearer-surface rule.
     fit = np.array([s.family.distance(s.prim, P[s.indices]).mean() for s in seg])
-    sound = fit <= 1.5 * np.median(fit)
+    sound = fit <= t.sound_fit * np.median(fit)
     trees: dict[int, cKDTree] = {}
     for a, b in {(int(min(u, v)), int(max(u, v))) for u, v in pairs.tolist() if u != v}:
         if not (sound[a] and sound[b]):
@@ -170,7 +170,7 @@ def _sides(seg: Segmentation, pairs: np.ndarray, ctx: Context) -> np.ndarray:
             if y not in trees:
                 trees[y] = cKDTree(P[seg[y].indices])
             Q = P[seg[x].indices]
-            Q = Q[np.isfinite(trees[y].query(Q, distance_upper_bound=3 * ctx.link)[0])]
+            Q = Q[np.isfinite(trees[y].query(Q, distance_upper_bound=t.side_links * ctx.link)[0])]
             if len(Q) < ctx.min_points:
                 continue
             # Tangent there (a plane and the wide cylinder beside it on one
@@ -183,7 +183,7 @@ def _sides(seg: Segmentation, pairs: np.ndarray, ctx: Context) -> np.ndarray:
             sd = sd[np.abs(sd) >= ctx.tau]
             if len(sd) >= ctx.min_points:
                 f = float(np.mean(sd > 0))
-                side[x, y] = 1 if f >= 0.8 else -1 if f <= 0.2 else 0
+                side[x, y] = 1 if f >= t.side_majority else -1 if 1 - f >= t.side_majority else 0
         # An edge has each face on one side of the other; a face that
         # crosses the other (a T-junction) or straddles it (a wrong
         # primitive cutting through a face) leaves the pair to nearness.
@@ -192,8 +192,7 @@ def _sides(seg: Segmentation, pairs: np.ndarray, ctx: Context) -> np.ndarray:
     return side
 
 
-def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: float,
-                       k: int = 12) -> None:
+def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: float) -> None:
     """Dissolve, in place, the small segments that their neighbours explain better.
 
     A sliver along an edge (points whose blurred normals kept them out of
@@ -209,7 +208,7 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
         return
     P = ctx.pre.points
     sizes = seg.sizes()
-    small = np.flatnonzero(sizes < 3 * ctx.min_points)
+    small = np.flatnonzero(sizes < ctx.tol.boundaries.dissolve_size * ctx.min_points)
     if len(small) == 0:
         return
     owner = seg.owner()
@@ -217,7 +216,7 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
     for j in small[np.argsort(sizes[small], kind="stable")]:
         s = seg[j]
         idx = s.indices
-        _, nb = ctx.pre.tree.query(P[idx], k=min(k, len(P)), distance_upper_bound=reach)
+        _, nb = ctx.pre.tree.query(P[idx], k=min(ctx.tol.boundaries.neighbours, len(P)), distance_upper_bound=reach)
         nb = nb[nb < len(P)]
         adj = np.unique(owner[nb])
         adj = [int(a) for a in adj if a >= 0 and a != j and a not in gone and sizes[a] > sizes[j]]

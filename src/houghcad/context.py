@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from .noise import CLEAN, NoisePolicy
 from .preprocess import Preprocessed
+from .tolerances import Tolerances
+
+#: Guards divisions by a zero spacing (standard units).
+_TINY = 1e-12
 
 
 @dataclass
@@ -30,6 +35,12 @@ class Context:
         Smallest segment.
     persistence : float
         Peak persistence threshold, fraction of max H.
+    tol : Tolerances
+        Every named threshold of the run.
+    policy : NoisePolicy
+        What the run does differently on a noisy cloud.
+    local : bool
+        Voting on a cluster (the splitting phase), not the whole cloud.
     """
 
     pre: Preprocessed
@@ -47,6 +58,8 @@ class Context:
     seed: int = 0
     local: bool = False
     neighbors: np.ndarray | None = None
+    tol: Tolerances = field(default_factory=Tolerances)
+    policy: NoisePolicy = CLEAN
 
     @property
     def spacing(self) -> float:
@@ -54,11 +67,37 @@ class Context:
 
     @property
     def noisy(self) -> bool:
-        """Noise of at least 0.15 spacings: the points scatter about their
-        surface instead of lying on it (the 188 Fit4CAD training samples
-        read at most 0.09, 99 % of them under 0.04)."""
-        return self.pre.noise >= 0.15 * self.pre.spacing
+        """Whether the run follows the noisy policy (see :mod:`houghcad.noise`)."""
+        return self.policy.noisy
 
     @property
     def cos_angle(self) -> float:
         return float(np.cos(self.angle))
+
+
+def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: NoisePolicy,
+                   epsilon: float | None = None, min_points: int | None = None, persistence: float = 0.1,
+                   seed: int = 0) -> Context:
+    """The run's scales from the point spacing and the estimated noise.
+
+    ``epsilon``: the removal distance as a fraction of the diagonal (None:
+    ``tol.scale.epsilon_taus`` × τ); ``min_points``: the smallest segment
+    (None: from the number of points).
+    """
+    t = tol.scale
+    s = pre.spacing
+    tau = max(t.tau_spacings * s, t.tau_sigmas * pre.noise)
+    eps = t.epsilon_taus * tau if epsilon is None else float(epsilon) * pre.diagonal
+    tau = min(tau, eps)
+    angle = np.radians(min(t.angle_max_deg, t.angle_deg + t.angle_deg_per_noise * pre.noise / max(s, _TINY)))
+    mp = min_points if min_points is not None else max(t.min_points_floor, n_points // t.points_per_min_point)
+    return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle),
+                   link=max(t.link_spacings * s, t.link_reach * pre.reach) + t.link_sigmas * pre.noise,
+                   cell=max(tau, t.cell_spacings * s), min_points=int(mp), max_radius=t.max_radius,
+                   persistence=float(persistence), max_peaks=t.max_peaks, max_directions=t.max_directions,
+                   min_votes=float(mp), seed=int(seed), tol=tol, policy=policy)
+
+
+def on_surface(ctx: Context) -> float:
+    """Distance to a surface that counts as on it (standard units)."""
+    return max(ctx.tol.scale.on_surface_spacings * ctx.spacing, ctx.tau)

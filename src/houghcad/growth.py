@@ -54,5 +54,6 @@ def absorb(seg: Segmentation, ctx: Context) -> None:
         pts = rest[near == k]
         # On a noisy cloud ε is 6 σ: a band that wide beyond a surface is
         # another surface's (its own points lie within τ = 3 σ).
-        pts = pts[surface_distance(seg.records[k], P[pts])[0] < (ctx.tau if ctx.noisy else ctx.epsilon)]
+        pts = pts[surface_distance(seg.records[k], P[pts])[0] < (ctx.tau if ctx.policy.absorb_within_tau
+                                                                  else ctx.epsilon)]
         seg.assign(pts, k)

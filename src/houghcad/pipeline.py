@@ -23,16 +23,18 @@ from .associate import Associator
 from .blend import find_fillets
 from .boundaries import dissolve_redundant, settle_edges, settle_noisy_edges
 from .consolidation import consolidate, prefer_planes, revisit_poor_fits
-from .context import Context
+from .context import Context, derive_context, on_surface
 from .errors import InputError
 from .families import Family
 from .growth import absorb, accept
 from .output import build_segments
+from .noise import NOISE_CHOICES, choose
 from .preprocess import preprocess
 from .recognize import recognize, refine
 from .result import Result
 from .splitting import splitting_phase
 from .state import SegmentRecord, Segmentation, checks_enabled
+from .tolerances import Tolerances
 
 PAPER_5_2 = "paper §5.2"
 PAPER_5_3 = "paper §5.3"
@@ -72,12 +74,12 @@ def _always(ctx: Context) -> bool:
     return True
 
 
-def _noisy(ctx: Context) -> bool:
-    return ctx.noisy
+def _nearest_edges(ctx: Context) -> bool:
+    return ctx.policy.nearest_edges
 
 
-def _clean(ctx: Context) -> bool:
-    return not ctx.noisy
+def _shared_edges(ctx: Context) -> bool:
+    return not ctx.policy.nearest_edges
 
 
 @dataclass(frozen=True)
@@ -107,7 +109,8 @@ def recognition(seg: Segmentation, run: Run) -> Segmentation:
     smaller ones, and the families voted per cluster, are settled in the
     splitting phase where every family competes for the same points."""
     ctx = run.ctx
-    gctx = replace(ctx, min_points=max(ctx.min_points, seg.n_points // 100))
+    share = ctx.tol.scale.first_round_share
+    gctx = replace(ctx, min_points=max(ctx.min_points, int(seg.n_points * share)))
     accept(recognize(np.arange(seg.n_points), run.voted, gctx, seg.free), seg, ctx)
     return seg
 
@@ -140,14 +143,9 @@ def consolidation(seg: Segmentation, run: Run) -> Segmentation:
     return seg
 
 
-def _on_surface(ctx: Context) -> float:
-    """Distance to a surface that counts as on it (standard units)."""
-    return max(0.3 * ctx.spacing, ctx.tau)
-
-
 def dissolve_pass(seg: Segmentation, run: Run) -> Segmentation:
     """Slivers that larger neighbours explain better are dissolved into them."""
-    dissolve_redundant(seg, run.ctx, _on_surface(run.ctx), run.ctx.link)
+    dissolve_redundant(seg, run.ctx, on_surface(run.ctx), run.ctx.link)
     return seg
 
 
@@ -181,7 +179,7 @@ def prefer_planes_pass(seg: Segmentation, run: Run) -> Segmentation:
 def settle_edges_pass(seg: Segmentation, run: Run) -> Segmentation:
     """Clean clouds: the faces' boundary curves lie on both faces; their
     points go to the smaller one."""
-    settle_edges(seg, run.ctx, _on_surface(run.ctx), run.ctx.link)
+    settle_edges(seg, run.ctx, on_surface(run.ctx), run.ctx.link)
     return seg
 
 
@@ -215,12 +213,12 @@ PIPELINE: tuple[Pass, ...] = (
     Pass("splitting", splitting, PAPER_5_3),
     Pass("consolidation", consolidation, EXTENSION, after=(ABSORB,)),
     Pass("dissolve_redundant", dissolve_pass, EXTENSION),
-    Pass("settle_noisy_edges", settle_noisy_pass, EXTENSION, when=_noisy),
-    Pass("revisit_poor_fits", revisit_pass, EXTENSION, when=_noisy, after=(ABSORB, SETTLE_NOISY),
+    Pass("settle_noisy_edges", settle_noisy_pass, EXTENSION, when=_nearest_edges),
+    Pass("revisit_poor_fits", revisit_pass, EXTENSION, when=_nearest_edges, after=(ABSORB, SETTLE_NOISY),
          only_if_changed=True),
-    Pass("fillets", fillets_pass, EXTENSION, when=_noisy, after=(ABSORB, SETTLE_NOISY), only_if_changed=True),
-    Pass("prefer_planes", prefer_planes_pass, EXTENSION, when=_noisy),
-    Pass("settle_edges", settle_edges_pass, EXTENSION, when=_clean),
+    Pass("fillets", fillets_pass, EXTENSION, when=_nearest_edges, after=(ABSORB, SETTLE_NOISY), only_if_changed=True),
+    Pass("prefer_planes", prefer_planes_pass, EXTENSION, when=_nearest_edges),
+    Pass("settle_edges", settle_edges_pass, EXTENSION, when=_shared_edges),
     Pass("refine", refine_pass, EXTENSION),
     ASSOCIATION,
 )
@@ -307,6 +305,13 @@ class Segmenter:
     check : bool, optional
         Check the state's invariants after every pass (default: when
         ``$HOUGHCAD_CHECK`` is set).
+    noise : {"auto", "clean", "noisy"}
+        The noise policy (:mod:`houghcad.noise`): "auto" reads the cloud as
+        noisy when its estimated σ is at least 0.15 point spacings.
+    tolerances : Tolerances or dict, optional
+        Named thresholds of every stage (:mod:`houghcad.tolerances`), a
+        :class:`~houghcad.tolerances.Tolerances` or ``{"stage": {"name":
+        value}}``; the rest keep their defaults.
 
     Attributes
     ----------
@@ -322,7 +327,8 @@ class Segmenter:
                  persistence: float = 0.1, min_points: int | None = None, seed: int = 0,
                  progress: Callable[[str, float], None] | None = None, merge: bool = True,
                  association: dict[str, Any] | None = None, trace: str | Path | TraceFn | None = None,
-                 check: bool | None = None):
+                 check: bool | None = None, noise: str = "auto",
+                 tolerances: Tolerances | dict[str, Any] | None = None):
         self.families = families
         self.epsilon = epsilon
         self.normals_method = normals_method
@@ -334,19 +340,34 @@ class Segmenter:
         self.association = association
         self.trace = trace
         self.check = check
+        self.noise = noise
+        self.tolerances = tolerances
 
     def get_options(self) -> dict[str, Any]:
         fams = self.families
         return {"families": fams if isinstance(fams, str) else [getattr(f, "name", f) for f in fams],
                 "epsilon": self.epsilon, "normals_method": self.normals_method,
                 "persistence": self.persistence, "min_points": self.min_points, "seed": self.seed,
-                "merge": bool(self.merge), "association": dict(self.association or {})}
+                "merge": bool(self.merge), "association": dict(self.association or {}), "noise": self.noise,
+                "tolerances": self._tolerances().to_dict()}
 
-    def _associator(self, merge: bool, options: dict[str, Any] | None) -> Associator:
+    def tolerances_dict(self) -> dict[str, Any]:
+        """``tolerances`` as ``{stage: {name: value}}`` (without the ``association`` options)."""
+        if isinstance(self.tolerances, Tolerances):
+            return self.tolerances.to_dict()
+        return dict(self.tolerances or {})
+
+    def _tolerances(self) -> Tolerances:
+        """The run's tolerances: ``tolerances`` with the ``association`` options over them."""
         try:
-            return Associator(merge=bool(merge), **(options or {}))
-        except TypeError as exc:
-            raise InputError(f"association options: {exc}") from None
+            t = self.tolerances if isinstance(self.tolerances, Tolerances) else \
+                Tolerances.from_dict(self.tolerances)
+            return t.updated({"association": dict(self.association)}) if self.association else t
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"tolerances: {exc}") from None
+
+    def _associator(self, merge: bool, tol: Tolerances) -> Associator:
+        return Associator(merge=bool(merge), tol=tol.association)
 
     def fit(self, points: np.ndarray, normals: np.ndarray | None = None, source: str | None = None) -> "Segmenter":
         """Segment ``points`` (n, 3), world units; ``normals`` (n, 3) optional."""
@@ -361,7 +382,10 @@ class Segmenter:
             raise InputError(f"epsilon must be a fraction of the diagonal in (0, 0.5), got {self.epsilon}")
         if not (0 < float(self.persistence) < 1):
             raise InputError(f"persistence must be in (0, 1), got {self.persistence}")
-        associator = self._associator(self.merge, self.association)
+        if self.noise not in NOISE_CHOICES:
+            raise InputError(f"noise must be one of {', '.join(NOISE_CHOICES)}, got {self.noise!r}")
+        tol = self._tolerances()
+        associator = self._associator(self.merge, tol)
         fams = fam_mod.select(self.families)
         # A family refining a selected one is not voted: it would tie with its
         # base family, which wins ties; the base's segments are offered to it
@@ -372,8 +396,8 @@ class Segmenter:
 
         t0 = time.perf_counter()
         report("preprocess", 0.0)
-        pre = preprocess(points, normals, method=self.normals_method, seed=self.seed)
-        ctx = self._context(pre, len(points))
+        pre = preprocess(points, normals, method=self.normals_method, seed=self.seed, noise=self.noise)
+        ctx = self._context(pre, len(points), tol)
         run = Run(ctx, fams, voted, associator, report)
         runner = _Runner(run, {"preprocess": time.perf_counter() - t0}, self._tracer(points),
                          checks_enabled() if self.check is None else bool(self.check))
@@ -394,8 +418,15 @@ class Segmenter:
             raise RuntimeError("call fit() first")
         seg, run, timing, points, source = self._before_association
         merge = self.merge if merge is None else merge
-        run = replace(run, associator=self._associator(merge, association if association is not None
-                                                       else self.association), progress=lambda s, f: None)
+        tol = run.ctx.tol
+        if association is not None:  # these options replace the Segmenter's association options
+            tol = replace(tol, association=replace(Tolerances.from_dict(self.tolerances_dict()).association))
+            try:
+                tol = tol.updated({"association": dict(association)})
+            except ValueError as exc:
+                raise InputError(f"tolerances: {exc}") from None
+        run = replace(run, ctx=replace(run.ctx, tol=tol), associator=self._associator(merge, tol),
+                      progress=lambda s, f: None)
         runner = _Runner(run, dict(timing))
         return self._result(runner(ASSOCIATION, seg.copy()), run, runner.timing, points, source)
 
@@ -407,8 +438,15 @@ class Segmenter:
         out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed)
         timing = {**timing, "output": time.perf_counter() - t}
         timing["total"] = sum(v for k, v in timing.items() if k != "total")
-        options = {**self.get_options(), "merge": bool(run.associator.merge),
-                   "normals_used": run.ctx.pre.normals_method}
+        ctx = run.ctx
+        options = {**self.get_options(), "merge": bool(run.associator.merge), "tolerances": ctx.tol.to_dict(),
+                   "normals_used": ctx.pre.normals_method,
+                   "derived": {"noise_policy": ctx.policy.name, "sigma": ctx.pre.noise / ctx.pre.transform.scale,
+                               "spacing": ctx.spacing / ctx.pre.transform.scale,
+                               "tau": ctx.tau / ctx.pre.transform.scale,
+                               "epsilon": ctx.epsilon / ctx.pre.transform.scale,
+                               "link": ctx.link / ctx.pre.transform.scale,
+                               "angle_deg": float(np.degrees(ctx.angle)), "min_points": ctx.min_points}}
         unsegmented = np.flatnonzero(seg.labels < 0).astype(np.int64)
         return Result(n_points=len(points), segments=out, unsegmented=unsegmented, timing=timing,
                       options=options, source=source, groups=groups)
@@ -422,19 +460,15 @@ class Segmenter:
         folder.mkdir(parents=True, exist_ok=True)
         return lambda step, name, seg: write_trace_ply(folder / f"{step:02d}_{name}.ply", points, seg, name)
 
-    def _context(self, pre, n: int) -> Context:
-        s = pre.spacing
-        # Inliers within three noise sigmas: on exact CAD samples this is tight,
-        # so tangent-continuous neighbours (a fillet beside a plane) stay apart.
-        tau = max(0.1 * s, 3.0 * pre.noise)
-        eps = 2.0 * tau if self.epsilon is None else float(self.epsilon) * pre.diagonal
-        tau = min(tau, eps)
-        angle = np.radians(min(45.0, 20.0 + 30.0 * pre.noise / max(s, 1e-12)))
-        mp = self.min_points if self.min_points is not None else max(8, n // 5000)
-        return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle),
-                       link=max(2.0 * s, 1.5 * pre.reach) + 2.0 * pre.noise, cell=max(tau, 0.5 * s),
-                       min_points=int(mp), max_radius=1.0, persistence=float(self.persistence),
-                       min_votes=float(mp), seed=int(self.seed))
+    def _context(self, pre, n: int, tol: Tolerances | None = None) -> Context:
+        """The run's context for the preprocessed cloud ``pre`` of n points."""
+        tol = self._tolerances() if tol is None else tol
+        try:
+            policy = choose(self.noise, pre.noise, pre.spacing)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        return derive_context(pre, n, tol, policy, epsilon=self.epsilon, min_points=self.min_points,
+                              persistence=self.persistence, seed=self.seed)
 
 
 def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="simple",

@@ -226,8 +226,14 @@ class Preprocessed:
     reach: float = 0.0
 
 
+#: The 16-neighbour noise estimate (spacings) above which ``noise="auto"``
+#: widens the normals' neighbourhood: sharp edges alone push it to ~0.2
+#: spacings on clean parts.
+WIDE_NORMALS_SPACINGS = 0.3
+
+
 def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: str = "auto",
-               k: int = 16, seed: int = 0) -> Preprocessed:
+               k: int = 16, seed: int = 0, noise: str = "auto") -> Preprocessed:
     """Put a world cloud in standard position and estimate its normals.
 
     Parameters
@@ -245,7 +251,12 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         Neighbourhood size.
     seed : int
         Seed of the voting estimate.
+    noise : {"auto", "clean", "noisy"}
+        The noise policy (:mod:`houghcad.noise`): "noisy" always widens the
+        PCA neighbourhood, "clean" never does, "auto" does when the
+        16-neighbour noise estimate exceeds :data:`WIDE_NORMALS_SPACINGS`.
     """
+    noise_policy = noise
     points = np.asarray(points, dtype=np.float64)
     center = points.mean(axis=0)
     x = points - center
@@ -299,8 +310,8 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     elif method not in ("auto", "pca", "voting"):
         raise InputError(f"unknown normals method {method!r} (auto, pca, voting, input)")
     else:
-        # Sharp edges alone push the estimate to ~0.2 spacings on clean parts.
-        if method != "pca" and noise > 0.3 * spacing and len(x) > k:
+        widen = noise_policy == "noisy" or (noise_policy == "auto" and noise > WIDE_NORMALS_SPACINGS * spacing)
+        if method != "pca" and widen and len(x) > k:
             # Noisy cloud: a wider neighbourhood averages the noise out (at 1%
             # of the diagonal, 64 neighbours give ~5° errors where 16 give 25°,
             # measured on synthetic cylinders); the noise estimate improves too.

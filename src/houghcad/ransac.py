@@ -9,6 +9,9 @@ import numpy as np
 from .cgal_random import seed_cgal_random
 from .context import Context
 
+#: RANSAC's distance must be positive (standard units).
+_TINY = 1e-6
+
 
 def ransac_pieces(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
     """Over-segment a cluster with CGAL's Efficient RANSAC (Schnabel et al. 2007).
@@ -32,8 +35,9 @@ def ransac_pieces(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
         nm.set(i, Vector_3(*n))
     sm = ps.add_int_map("shape_index")
     seed_cgal_random(ctx.seed)
-    efficient_RANSAC(ps, sm, min_points=max(ctx.min_points, 10), epsilon=max(ctx.tau, 1e-6),
-                     cluster_epsilon=ctx.link, normal_threshold=float(np.cos(ctx.angle)), probability=0.01,
-                     planes=True, cylinders=True, cones=True, spheres=True, tori=True)
+    t = ctx.tol.splitting
+    efficient_RANSAC(ps, sm, min_points=max(ctx.min_points, t.ransac_min_points), epsilon=max(ctx.tau, _TINY),
+                     cluster_epsilon=ctx.link, normal_threshold=float(np.cos(ctx.angle)),
+                     probability=t.ransac_probability, planes=True, cylinders=True, cones=True, spheres=True, tori=True)
     lab = np.fromiter((sm.get(i) for i in range(len(idx))), dtype=np.int64, count=len(idx))
     return [idx[lab == k] for k in range(lab.max() + 1) if (lab == k).sum() >= ctx.min_points]

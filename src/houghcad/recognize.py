@@ -29,11 +29,12 @@ COMPLEX_MAX_PEAKS = 6
 BESIDE_TOP_PEAKS = 2
 
 
-def dense_subsets(P: np.ndarray, link: float, min_points: int) -> list[np.ndarray]:
-    """Connected dense subsets of P (n, 3): DBSCAN components of at least min_points."""
+def dense_subsets(P: np.ndarray, link: float, min_points: int, min_samples: int) -> list[np.ndarray]:
+    """Connected dense subsets of P (n, 3): DBSCAN components (core points
+    with ``min_samples`` neighbours within ``link``) of at least min_points."""
     if len(P) < min_points:
         return []
-    lab = DBSCAN(eps=link, min_samples=3).fit_predict(P)
+    lab = DBSCAN(eps=link, min_samples=min_samples).fit_predict(P)
     ok = lab >= 0
     if not ok.any():
         return []
@@ -108,7 +109,7 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
         ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
     sel = np.flatnonzero(ok)
     out = []
-    for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
+    for comp in dense_subsets(P[sel], ctx.link, ctx.min_points, ctx.tol.recognition.dense_min_samples):
         loc = sel[comp]
         X = P[loc]
         # A one-row strip is not a surface patch...
@@ -223,7 +224,8 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
             out.append(c)
             continue
         idx, dd = c.indices[k], c.distances[k]
-        for comp in dense_subsets(ctx.pre.points[idx], ctx.link, ctx.min_points):
+        for comp in dense_subsets(ctx.pre.points[idx], ctx.link, ctx.min_points,
+                                  ctx.tol.recognition.dense_min_samples):
             out.append(Candidate(c.family, c.prim, idx[comp],
                                  mean_fitting_error(dd[comp], ctx.pre.points[idx[comp]]), dd[comp]))
     return out

@@ -26,22 +26,23 @@ from .recognize import dense_subsets, recognize, select
 from .state import Candidate, Segmentation, mean_fitting_error
 
 
-def clusters(idx: np.ndarray, ctx: Context, min_samples: int = 4) -> list[np.ndarray]:
+def clusters(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
     """DBSCAN clusters (global indices) of the points ``idx``, largest first."""
     if len(idx) < ctx.min_points:
         return []
-    lab = DBSCAN(eps=ctx.link, min_samples=min_samples).fit_predict(ctx.pre.points[idx])
+    lab = DBSCAN(eps=ctx.link, min_samples=ctx.tol.splitting.cluster_min_samples).fit_predict(ctx.pre.points[idx])
     out = [idx[lab == k] for k in range(lab.max() + 1)]
     out = [c for c in out if len(c) >= ctx.min_points]
     return sorted(out, key=lambda c: (-len(c), int(c[0])))
 
 
-def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context, max_rounds: int = 6,
+def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
                     progress: Callable[[int], None] | None = None) -> None:
     """Iterate DBSCAN clustering + recognition on what is left, in place.
     ``progress(n)`` is called after each cluster of n points."""
     lctx = replace(ctx, local=True)
-    for _ in range(max_rounds):
+    t = ctx.tol.splitting
+    for _ in range(t.max_rounds):
         rest = np.flatnonzero(seg.free)
         found_any = False
         for cl in clusters(rest, ctx):
@@ -52,7 +53,7 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context, max
             found = recognize(cl, families, lctx, avail)
             if not found:
                 found = coaxial_bands(cl, families, seg, lctx)
-            if not found and len(cl) >= 3 * ctx.min_points:
+            if not found and len(cl) >= t.ransac_min_size * ctx.min_points:
                 for piece in ransac_pieces(cl, ctx):
                     got = recognize(piece, families, lctx, avail)
                     for c in got:  # hidden from the next pieces
@@ -84,10 +85,42 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], seg: Segmentation, ctx
     cyl = next((f for f in families if f.name == "cylinder"), None)
     if cyl is None or not len(seg) or len(cl) < ctx.min_points:
         return []
+    t = ctx.tol.splitting
+    P = ctx.pre.points
+    axes, border = _adjacent_axes(cl, seg, ctx)
+    out = []
+    ext = np.concatenate([cl, border])
+    for a in axes:
+        prim = _circle_about(a, P[cl], ctx)
+        if prim is None:
+            continue
+        for _ in range(t.coaxial_refits):
+            on = ext[cyl.distance(prim, P[ext]) < t.coaxial_band_taus * ctx.tau]
+            if np.isin(cl, on).mean() < t.coaxial_cover:
+                break
+            new = cyl.fit(prim, P[on], ctx.pre.normals[on])
+            if new is None or not cyl.valid(new, ctx):
+                break
+            prim = new
+        else:
+            d = cyl.distance(prim, P[cl])
+            ok = d < ctx.tau
+            if ok.mean() < t.coaxial_cover:
+                continue
+            sel = cl[ok]
+            for comp in dense_subsets(P[sel], ctx.link, ctx.min_points, ctx.tol.recognition.dense_min_samples):
+                out.append(Candidate(cyl, prim, sel[comp], mean_fitting_error(d[ok][comp], P[sel[comp]]),
+                                     d[ok][comp]))
+    return select(out, seg.free, ctx)
+
+
+def _adjacent_axes(cl: np.ndarray, seg: Segmentation, ctx: Context) -> tuple[list[np.ndarray], np.ndarray]:
+    """The distinct axes or normals (unit (3,)) of the segments adjacent to the
+    cluster ``cl``, and their points bordering it (global indices)."""
+    t = ctx.tol.splitting
     P = ctx.pre.points
     owner = seg.labels
-    k = min(12, len(P))
-    dist, nb = ctx.pre.tree.query(P[cl], k=k, distance_upper_bound=ctx.link)
+    dist, nb = ctx.pre.tree.query(P[cl], k=min(t.coaxial_neighbours, len(P)), distance_upper_bound=ctx.link)
     nb = nb[np.isfinite(dist)]
     adj = np.unique(owner[nb])
     adj = adj[adj >= 0]
@@ -98,35 +131,20 @@ def coaxial_bands(cl: np.ndarray, families: list[Family], seg: Segmentation, ctx
         if fr is None or fr.direction is None:
             continue
         a = np.asarray(fr.direction, float)
-        if all(abs(a @ b) < np.cos(np.radians(2.0)) for b in axes):
+        if all(abs(a @ b) < np.cos(np.radians(t.coaxial_axis_deg)) for b in axes):
             axes.append(a)
-    out = []
-    ext = np.concatenate([cl, border])
-    for a in axes:
-        R = rotation_to_z(a)
-        Q = (P[cl] @ R.T)[:, :2]
-        A = np.c_[2 * Q, np.ones(len(Q))]
-        sol = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0]
-        r2 = sol[2] + sol[:2] @ sol[:2]
-        if not 0 < r2 < ctx.max_radius**2:
-            continue
-        prim = Primitive("cylinder", {"axis_point": R.T @ np.array([sol[0], sol[1], 0.0]), "axis": a,
-                                      "radius": float(np.sqrt(r2))})
-        for _ in range(2):
-            on = ext[cyl.distance(prim, P[ext]) < 2 * ctx.tau]
-            if np.isin(cl, on).mean() < 0.8:
-                break
-            new = cyl.fit(prim, P[on], ctx.pre.normals[on])
-            if new is None or not cyl.valid(new, ctx):
-                break
-            prim = new
-        else:
-            d = cyl.distance(prim, P[cl])
-            ok = d < ctx.tau
-            if ok.mean() < 0.8:
-                continue
-            sel = cl[ok]
-            for comp in dense_subsets(P[sel], ctx.link, ctx.min_points):
-                out.append(Candidate(cyl, prim, sel[comp], mean_fitting_error(d[ok][comp], P[sel[comp]]),
-                                     d[ok][comp]))
-    return select(out, seg.free, ctx)
+    return axes, border
+
+
+def _circle_about(a: np.ndarray, X: np.ndarray, ctx: Context) -> Primitive | None:
+    """The cylinder of axis ``a`` (unit (3,)) through the circle fitted to the
+    points X (m, 3) projected across it (Kasa's algebraic fit), or None."""
+    R = rotation_to_z(a)
+    Q = (X @ R.T)[:, :2]
+    A = np.c_[2 * Q, np.ones(len(Q))]
+    sol = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0]
+    r2 = sol[2] + sol[:2] @ sol[:2]
+    if not 0 < r2 < ctx.max_radius**2:
+        return None
+    return Primitive("cylinder", {"axis_point": R.T @ np.array([sol[0], sol[1], 0.0]), "axis": a,
+                                  "radius": float(np.sqrt(r2))})

@@ -1,0 +1,329 @@
+"""Every threshold of the pipeline, named, with its unit, default and reason.
+
+One frozen dataclass per stage, in the manner of CGAL's
+``Efficient_RANSAC::Parameters``; :class:`Tolerances` holds them all. Units:
+
+- ``spacings``: the median nearest-neighbour distance of the cloud;
+- ``σ``: the estimated noise standard deviation;
+- ``τ``: the run's inlier distance; ``links``: its neighbour distance;
+- ``diagonals``: the bounding-box diagonal; ``standard units``: the unit cube
+  the cloud is scaled into;
+- ``degrees``; ``points``; ``min_points``: multiples of the smallest segment;
+- ``share``: a fraction of a set; ``ratio``: a factor between two figures.
+
+Set them from the API (``Segmenter(tolerances=...)``, a :class:`Tolerances` or
+a dict ``{"stage": {"name": value}}``); the run records them in the JSON
+``options["tolerances"]``; ``docs/tolerances.md`` lists them
+(``python -m houghcad.tolerances`` writes that page).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import MISSING, dataclass, field, fields, replace
+from typing import Any
+
+
+def tol(default: Any, unit: str, why: str) -> Any:
+    """A tolerance field: its default, unit and one line saying why."""
+    return field(default=default, metadata={"unit": unit, "why": why})
+
+
+@dataclass(frozen=True)
+class ScaleTolerances:
+    """The run's scales, derived from the point spacing and the noise (:mod:`houghcad.context`)."""
+
+    tau_spacings: float = tol(0.1, "spacings", "inlier distance τ on exact samples: tight, so tangent-continuous "
+                              "neighbours (a fillet beside a plane) stay apart")
+    tau_sigmas: float = tol(3.0, "σ", "inlier distance τ on noisy clouds: three noise sigmas hold 99.7 % of a face")
+    epsilon_taus: float = tol(2.0, "τ", "removal distance ε around accepted primitives (the paper's 1-3 % of the "
+                              "diagonal on its clouds)")
+    angle_deg: float = tol(20.0, "degrees", "normal compatibility on exact samples: PCA normals of CAD samples are "
+                           "within a few degrees except at creases")
+    angle_deg_per_noise: float = tol(30.0, "degrees per (σ / spacing)", "normals scatter as the noise grows against "
+                                     "the spacing")
+    angle_max_deg: float = tol(45.0, "degrees", "beyond this a normal no longer tells the surface's orientation")
+    link_spacings: float = tol(2.0, "spacings", "neighbour distance that keeps a surface's sample connected")
+    link_reach: float = tol(1.5, "6th-neighbour distances", "the link spans uneven sampling too")
+    link_sigmas: float = tol(2.0, "σ", "noise spreads the points across the surface, widening the gaps")
+    cell_spacings: float = tol(0.5, "spacings", "accumulator cell for lengths: finer than the sampling resolves "
+                               "only splits the votes")
+    min_points_floor: int = tol(8, "points", "smallest segment: fewer points do not pin down a primitive")
+    points_per_min_point: int = tol(5000, "points", "smallest segment grows with the cloud: n / this")
+    first_round_share: float = tol(0.01, "share of the cloud", "the whole-cloud round keeps only substantial "
+                                   "segments; smaller ones are settled per cluster, where every family competes")
+    max_radius: float = tol(1.0, "standard units", "radii beyond the unit cube are planes read as curved")
+    max_peaks: int = tol(24, "peaks", "peaks evaluated per accumulator: each costs a refit")
+    max_directions: int = tol(12, "directions", "normal directions tried per family (planes, axes)")
+    on_surface_spacings: float = tol(0.3, "spacings", "a point this close to a surface (or within τ) lies on it, for "
+                                     "edge settling and dissolving")
+
+
+@dataclass(frozen=True)
+class RecognitionTolerances:
+    """Candidate evaluation and selection (paper §5.2, :mod:`houghcad.recognize`)."""
+
+    dense_min_samples: int = tol(3, "points", "DBSCAN core size of a dense subset X_i: a row of points is connected")
+    refit_points: int = tol(600, "points", "least-squares refits on a random subset: beyond this the fit no "
+                            "longer moves")
+    coarse_taus: float = tol(4.0, "τ", "intermediate inlier distance between the cell's and τ, so each refit sees "
+                             "cleaner inliers")
+    clean_trim_rounds: int = tol(4, "rounds", "refits on the closer half of the inliers on exact samples")
+    noisy_trim_rounds: int = tol(2, "rounds", "refits on the inliers within trim_sigmas on noisy clouds")
+    trim_stop_taus: float = tol(0.05, "τ", "exact samples: stop trimming once the inliers fit to this")
+    trim_sigmas: float = tol(2.0, "σ", "noisy clouds: 95 % of a face within 2 σ, while a neighbour's points within τ "
+                             "sit further out on one side")
+    trim_min_points: float = tol(2.0, "min_points", "trimming keeps enough points to refit")
+    strip_width_spacings: float = tol(0.4, "spacings", "a dense subset narrower than this across is a one-row strip, "
+                                      "not a surface patch")
+    strip_neighbours: int = tol(8, "neighbours", "points around a strip checked for the rows its neighbours took")
+    strip_min_points: int = tol(3, "points", "a strip's surrounding rows need a covariance")
+    slice_sigmas: float = tol(2.0, "σ", "on the whole cloud a candidate fitting worse than this (and slice_taus) is a "
+                              "tangent slice that another family explains exactly")
+    slice_taus: float = tol(0.1, "τ", "the tangent-slice gate on exact samples")
+    compete_taus: float = tol(0.25, "τ", "a point leaves a candidate only for one explaining it clearly better")
+    compete_sigmas: float = tol(2.0, "σ", "noisy clouds: some candidate among dozens passes through any point; a "
+                                "margin under the noise shreds the true surface")
+    keep_share: float = tol(0.6, "share", "a selected candidate must still hold this much of its points free; "
+                            "candidates sharing more than 1 - this compete")
+    settle_share: float = tol(0.5, "share", "candidates mostly overlapping the winner are settled with it")
+    complex_max_peaks: int = tol(6, "peaks", "a complex family's candidate costs tens of milliseconds of nonlinear "
+                                 "fits; its surface is one of the most persistent peaks")
+    beside_top_peaks: int = tol(2, "peaks", "peaks a stacked family adds from the votes off its top surface")
+    beside_top_persistence: float = tol(0.5, "share of the persistence threshold", "a surface sharing a placement "
+                                        "with a larger one votes a lower peak, at least this persistent")
+    covers_size: float = tol(1.5, "ratio", "a complex candidate explaining this many times the points ...")
+    covers_mfe: float = tol(1.25, "ratio", "... at most this much worse replaces another (same rank)")
+    complex_wins_mfe: float = tol(0.5, "ratio", "a more complex family wins with at most this share of the simpler "
+                                  "one's error ...")
+    complex_wins_abs: float = tol(2e-5, "MFE (diagonals)", "... and a difference above this, not rounding")
+    noise_mean_sigmas: float = tol(0.8, "σ", "mean |d| of Gaussian noise (0.798 σ): the error no surface beats")
+    noise_floor_size: float = tol(0.9, "share of the largest", "candidates about as large as the largest show the "
+                                  "noise's own error where σ is overestimated")
+    noise_floor_se: float = tol(1.5, "standard errors", "an excess below two standard errors of the mean |d| "
+                                "(0.755 m / √n) is the floor itself")
+    noise_floor_least: float = tol(0.05, "share of the floor", "the least excess selection resolves")
+    neighbours: int = tol(10, "neighbours", "neighbour table handed to the families' placements")
+
+
+@dataclass(frozen=True)
+class SplittingTolerances:
+    """The splitting phase (paper §5.3, :mod:`houghcad.splitting`, :mod:`houghcad.ransac`)."""
+
+    max_rounds: int = tol(6, "rounds", "clustering rounds; each finds what the last freed")
+    cluster_min_samples: int = tol(4, "points", "DBSCAN core size of a cluster")
+    ransac_min_size: float = tol(3.0, "min_points", "clusters this large where the vote finds nothing are "
+                                 "over-segmented with RANSAC")
+    ransac_min_points: int = tol(10, "points", "RANSAC's smallest shape")
+    ransac_probability: float = tol(0.01, "probability", "RANSAC's chance of missing the largest shape")
+    coaxial_neighbours: int = tol(12, "neighbours", "points around a cluster read for its adjacent segments")
+    coaxial_axis_deg: float = tol(2.0, "degrees", "adjacent axes closer than this are one")
+    coaxial_band_taus: float = tol(2.0, "τ", "boundary points this close to the cylinder join its refit")
+    coaxial_cover: float = tol(0.8, "share", "the cylinder must explain this much of the cluster")
+    coaxial_refits: int = tol(2, "refits", "refits on the cluster and its boundary rows")
+
+
+@dataclass(frozen=True)
+class BoundaryTolerances:
+    """Edge settling and dissolving (extensions, :mod:`houghcad.boundaries`)."""
+
+    neighbours: int = tol(12, "neighbours", "points read around each point for adjacent segments")
+    noisy_rounds: int = tol(8, "rounds", "each round moves the points next to the boundary; it walks to where the "
+                            "surfaces cross")
+    side_links: float = tol(3.0, "links", "a face's points this near the other face tell its side")
+    side_majority: float = tol(0.8, "share", "the side is clear when this many points agree")
+    sound_fit: float = tol(1.5, "ratio to the median fit", "a primitive fitting worse than this is wrong, and keeps "
+                           "the nearest-surface rule")
+    dissolve_size: float = tol(3.0, "min_points", "segments smaller than this may be slivers")
+
+
+@dataclass(frozen=True)
+class AdjacencyTolerances:
+    """Which segments touch, and smoothly (:mod:`houghcad.adjacency`)."""
+
+    neighbours: int = tol(8, "neighbours", "points read around each point for contacts")
+    crease_angles: float = tol(0.5, "angle tolerances", "fitted normals agreeing within this are tangent-continuous; "
+                               "a crease of a few degrees is still a crease")
+    smooth_share: float = tol(0.5, "share", "most contacts must agree for a smooth boundary")
+    contact_divisor: float = tol(3.0, "1 / √(points of the smaller)", "a boundary, not a corner, has about √n "
+                                 "contacts; a pair needs √n / this")
+    contact_min: int = tol(3, "points", "a contact of fewer points is a corner")
+
+
+@dataclass(frozen=True)
+class ConsolidationTolerances:
+    """Consolidation (extension, :mod:`houghcad.consolidation`)."""
+
+    dominant: float = tol(0.6, "share", "a candidate must explain this much of a poorly fitted segment to replace it")
+    excess: float = tol(1.3, "ratio to the noise's cost", "segments fitted within this are left alone")
+    least_excess: float = tol(0.05, "share of the noise's cost", "excesses below this are the noise's own")
+    revisit_min_size: float = tol(3.0, "min_points", "smaller segments are not revisited")
+    complex_halving: float = tol(0.5, "ratio", "a more complex family must halve the excess to displace a simpler one")
+    peel_share: float = tol(2 / 3, "share of the group", "a face this dominant is not a piece of a carved surface")
+    peel_retries: int = tol(2, "faces", "where the vote takes nothing, the largest faces set aside in turn")
+    merge_rounds: int = tol(10, "rounds", "rounds of segments taking their adjacent pieces")
+    suffices_points: int = tol(600, "points", "refit of one simple primitive over several pieces")
+    cover_share: float = tol(0.8, "share", "a primitive covers a piece holding this much of it within τ")
+    cover_ratio: float = tol(1.1, "ratio", "... fitting it no worse than this times the piece's own fit")
+    cover_taus: float = tol(0.02, "τ", "... plus this, the rounding of exact fits")
+    own_fit_ratio: float = tol(1.5, "ratio", "or no worse than this times the covering segment's fit to its own points")
+    strict_se: float = tol(1.5, "standard errors", "noisy clouds: over all the piece's points, within this of the "
+                           "piece's own fit")
+    plane_min_points: int = tol(10, "points", "curved segments smaller than this keep their family")
+    plane_se: float = tol(2.0, "standard errors", "a plane takes a curved segment unless it fits clearly worse")
+
+
+@dataclass(frozen=True)
+class FilletTolerances:
+    """Rolling-ball fillets on noisy clouds (extension, :mod:`houghcad.blend`)."""
+
+    lr_min: float = tol(25.0, "σ²", "likelihood ratio a fillet must reach over the sharp corner (sharp edges of the "
+                        "synthetic parts reached 11-16, 28 with a tilted neighbour)")
+    passes: int = tol(3, "passes", "a segment gives points to one fillet per pass")
+    radii: int = tol(48, "radii", "radii tried per corner before a local refinement")
+    fine_radii: int = tol(9, "radii", "radii of the local refinement")
+    corner_min_deg: float = tol(25.0, "degrees", "narrower corners are not filleted by a circle in the data")
+    corner_max_deg: float = tol(155.0, "degrees", "wider corners are nearly flat: no fillet to tell")
+    parallel_deg: float = tol(15.0, "degrees", "lines or planes closer to parallel make no corner")
+    coaxial_deg: float = tol(2.0, "degrees", "axes closer than this are one")
+    coaxial_taus: float = tol(2.0, "τ", "axis lines this close are one ...")
+    coaxial_diagonals: float = tol(0.01, "diagonals", "... or this close")
+    extent_quantile: float = tol(0.9, "quantile", "a face's extent along its ray, robust to strays")
+    band_share: float = tol(0.5, "share of the shorter extent", "the corner's band along each ray")
+    band_before_sigmas: float = tol(3.0, "σ", "points this far before the corner still belong to its band")
+    band_min_points: int = tol(10, "points", "a band needs points to fit a radius")
+    trim_sigmas: float = tol(2.5, "σ", "the neighbours' lines refitted on their points within this")
+    trim_rounds: int = tol(3, "rounds", "trimmed refits of the neighbours' lines")
+    trim_min_points: int = tol(20, "points", "a line refit needs this many points")
+    min_radius_sigmas: float = tol(2.0, "σ", "a fillet narrower than the noise cannot be told from a sharp edge")
+    taken_share: float = tol(0.8, "share", "a segment with this much of it in the corner's band is a piece of the "
+                             "fillet")
+    max_radius_diagonals: float = tol(0.2, "diagonals", "largest fillet radius tried")
+    reach_diagonals: float = tol(0.25, "diagonals", "each face's points this near the other make its corner")
+    aligned_min_deg: float = tol(0.5, "degrees", "a cylinder this close to a plane's normal stands on it already")
+    aligned_max_deg: float = tol(6.0, "degrees", "a short cylinder's axis this close to a plane's normal is snapped "
+                                 "to it")
+    aligned_rounds: int = tol(3, "rounds", "trimmed circle fits of the snapped cylinder")
+
+
+@dataclass(frozen=True)
+class AssociationTolerances:
+    """Maximal primitives and relations (paper §5.4, :mod:`houghcad.associate`)."""
+
+    angle_tol: float = tol(2.0, "degrees", "largest angle between parallel axes or normals, and between equal "
+                           "half-angles")
+    length_tol: float | None = tol(None, "diagonals", "largest difference between equal lengths; None: from τ, at "
+                                   "least length_floor")
+    length_floor: float = tol(0.002, "diagonals", "the least length tolerance")
+    length_taus: float = tol(0.5, "τ", "the length tolerance follows the inlier distance")
+    relative_tol: float = tol(0.02, "share of the value", "lengths may also differ by this")
+    extent_tol: float = tol(0.1, "share of the value", "extents are equal within this: they come from the points, "
+                            "not a fit")
+    extent_floor: float = tol(0.02, "diagonals", "the least extent tolerance")
+    contact: float = tol(0.3, "√(points of the smaller)", "pieces of one surface are one part when each side has "
+                         "this many points touching the other: a shared boundary, not a corner")
+    propose_lengths: float = tol(4.0, "length tolerances", "same-surface proposals are generous; the union refit "
+                                 "decides")
+    propose_angles: float = tol(3.0, "angle tolerances", "same-surface proposals are generous")
+    verify_taus: float = tol(0.5, "τ", "a union refit keeps every member within its own fit plus this")
+    refit_points: int = tol(4000, "points", "refits on a regular subsample: beyond this the parameters no longer move")
+    axis_lengths: float = tol(2.0, "length tolerances", "an axis fitted on a piece of length h is known to about "
+                              "this / h radians")
+    coaxial_lengths: float = tol(2.0, "length tolerances", "axis lines this close are one")
+    mirror_lengths: float = tol(2.0, "length tolerances", "mirror images of pivots this close match")
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """All the stages' tolerances (see the module docstring)."""
+
+    scale: ScaleTolerances = field(default_factory=ScaleTolerances)
+    recognition: RecognitionTolerances = field(default_factory=RecognitionTolerances)
+    splitting: SplittingTolerances = field(default_factory=SplittingTolerances)
+    boundaries: BoundaryTolerances = field(default_factory=BoundaryTolerances)
+    adjacency: AdjacencyTolerances = field(default_factory=AdjacencyTolerances)
+    consolidation: ConsolidationTolerances = field(default_factory=ConsolidationTolerances)
+    fillets: FilletTolerances = field(default_factory=FilletTolerances)
+    association: AssociationTolerances = field(default_factory=AssociationTolerances)
+
+    def to_dict(self) -> dict[str, dict[str, Any]]:
+        """``{stage: {name: value}}``, every field."""
+        return {f.name: {g.name: getattr(getattr(self, f.name), g.name) for g in fields(getattr(self, f.name))}
+                for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, dict[str, Any]] | None) -> "Tolerances":
+        """Tolerances from ``{stage: {name: value}}``; missing ones keep their default.
+        Raises ValueError naming an unknown stage or tolerance."""
+        return cls().updated(d or {})
+
+    def updated(self, d: dict[str, dict[str, Any]]) -> "Tolerances":
+        """A copy with the values of ``{stage: {name: value}}`` (or ``{"stage.name": value}``) set."""
+        nested: dict[str, dict[str, Any]] = {}
+        for k, v in d.items():
+            if "." in k:
+                stage, name = k.split(".", 1)
+                nested.setdefault(stage, {})[name] = v
+            elif isinstance(v, dict):
+                nested.setdefault(k, {}).update(v)
+            else:
+                raise ValueError(f"tolerance {k!r}: give a stage's dict or 'stage.name'")
+        out = self
+        stages = {f.name for f in fields(self)}
+        for stage, values in nested.items():
+            if stage not in stages:
+                raise ValueError(f"unknown tolerance stage {stage!r} (known: {', '.join(sorted(stages))})")
+            group = getattr(out, stage)
+            known = {f.name: f for f in fields(group)}
+            for name, value in values.items():
+                if name not in known:
+                    raise ValueError(f"unknown tolerance {stage}.{name}")
+                values[name] = _checked(f"{stage}.{name}", known[name], value)
+            out = replace(out, **{stage: replace(group, **values)})
+        return out
+
+    def changed(self) -> dict[str, Any]:
+        """``{"stage.name": value}`` of the tolerances that differ from their defaults."""
+        base = Tolerances().to_dict()
+        return {f"{s}.{n}": v for s, g in self.to_dict().items() for n, v in g.items() if base[s][n] != v}
+
+
+def _checked(name: str, f: Any, value: Any) -> Any:
+    """``value`` as the field's type (int or float, or None where allowed)."""
+    default = f.default if f.default is not MISSING else None
+    if value is None:
+        if default is None:
+            return None
+        raise ValueError(f"tolerance {name} cannot be None")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"tolerance {name} must be a number, got {value!r}")
+    if isinstance(default, int) and not isinstance(default, bool):
+        if float(value) != int(value):
+            raise ValueError(f"tolerance {name} must be a whole number, got {value!r}")
+        return int(value)
+    if not value == value or value in (float("inf"), float("-inf")):
+        raise ValueError(f"tolerance {name} must be finite, got {value!r}")
+    return float(value)
+
+
+def markdown() -> str:
+    """The tolerances as the Markdown page docs/tolerances.md."""
+    lines = ["# Tolerances", "",
+             "Every threshold of the pipeline, by stage: its name, unit, default and why. Generated by",
+             "`python -m houghcad.tolerances > docs/tolerances.md` from `src/houghcad/tolerances.py`; set them with",
+             "`Segmenter(tolerances={\"stage\": {\"name\": value}})` (or `{\"stage.name\": value}`). A run records",
+             "all of them in its JSON `options[\"tolerances\"]`.", ""]
+    for f in fields(Tolerances):
+        group = f.default_factory()
+        lines += [f"## `{f.name}`", "", (type(group).__doc__ or "").strip(), "",
+                  "| name | unit | default | why |", "|---|---|---|---|"]
+        for g in fields(group):
+            v = getattr(group, g.name)
+            v = f"{v:.6g}" if isinstance(v, float) else str(v)
+            lines.append(f"| `{g.name}` | {g.metadata['unit']} | {v} | {g.metadata['why']} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.stdout.write(markdown())
