@@ -57,8 +57,8 @@ from scipy.spatial.transform import Rotation
 from ..errors import InputError
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import (REGISTRY, Family, Frame, Placement, Primitive, axis_from_normal_lines, gauss_newton,
-                   lines_intersection, planes_intersection, unit)
+from .base import (REGISTRY, SEARCHES, SELECTION_WORDS, Family, Frame, Placement, Primitive, add,
+                   axis_from_normal_lines, gauss_newton, lines_intersection, unit)
 from .cone import cone_frame
 
 __all__ = ["PLACEMENTS", "ParametricFamily", "define_family", "unregister_family", "user_families"]
@@ -70,7 +70,6 @@ PLACEMENTS = ("none", "plane", "axis", "extrusion", "centre", "apex")
 #: samples: the unit cube seen from any point in it.
 LENGTH_SPAN = 2.0
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
-_RESERVED = ("simple", "all")
 _USER: set[str] = set()
 
 
@@ -358,10 +357,10 @@ class ParametricFamily(Family):
     (k,) of the shape parameters in declaration order.
     """
 
-    simple = False
-    global_search = False
+    role = "complex"
+    search = "cluster"
     #: Above every built-in family: a simpler family wins equal fits.
-    complexity = 10
+    precedence = 10
     #: Points voting per cluster (a deterministic subsample; every point is
     #: still evaluated).
     max_voters = 600
@@ -879,8 +878,8 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
                   bounds: Mapping[str, tuple[float, float]] | None = None,
                   lengths: Sequence[str] | Mapping[str, float] | None = None,
                   placement: str | Callable = "axis", samples: tuple[int, int] | None = None,
-                  valid: Callable[[dict], bool] | None = None, global_search: bool = True,
-                  complexity: int = 10, register: bool = True) -> ParametricFamily:
+                  valid: Callable[[dict], bool] | None = None, search: str = "whole",
+                  precedence: int = 10, register: bool = True) -> ParametricFamily:
     """Declare a parametric family x(u, v; a), y(u, v; a), z(u, v; a).
 
     Parameters
@@ -922,13 +921,14 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
     valid : callable, optional
         ``valid({param: value}) -> bool`` on standard-frame values; rejects
         degenerate shapes a simpler family covers.
-    global_search : bool
-        Also seek the family on the whole cloud in the first round (placed
-        from all the normals), not only per cluster in the splitting phase.
+    search : {"whole", "cluster"}
+        ``"whole"``: also seek the family on the whole cloud in the first
+        round (placed from all the normals), not only per cluster in the
+        splitting phase (``"cluster"``; see :attr:`Family.search`).
         On a cloud that is mostly one such surface this keeps the simple
         families from taking it band by band first; on a multi-surface part
-        it costs one vote (about a second) for nothing: turn it off there.
-    complexity : int
+        it costs one vote (about a second) for nothing: use ``"cluster"`` there.
+    precedence : int
         Rank for ties (built-in: plane 0 … torus 4). A family more complex
         than its competitor must halve its fitting error to replace it
         (``recognize._better``); the default 10 puts it above every built-in
@@ -943,7 +943,7 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
     """
     if not isinstance(name, str) or not _NAME.match(name):
         raise InputError(f"family name must match [a-z][a-z0-9_]*, got {name!r}")
-    if name in _RESERVED or (name in REGISTRY and name not in _USER):
+    if name in SELECTION_WORDS or (name in REGISTRY and name not in _USER):
         raise InputError(f"family name {name!r} is taken by a built-in family")
     names = [str(p) for p in params]
     if not 1 <= len(names) <= 3:
@@ -1015,10 +1015,12 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
         raise InputError(f"{name}: no parameter enters the equations linearly (or none is solvable): the Hough "
                          "transform is sampled by solving for linear parameters")
     fam = ParametricFamily(name, eq, names, dims, ur, vr, solved, bnds, placement, samples, valid)
-    fam.global_search = bool(global_search)
-    fam.complexity = int(complexity)
+    if search not in SEARCHES:
+        raise InputError(f"{name}: search must be one of {SEARCHES}, got {search!r}")
+    fam.search = search
+    fam.precedence = int(precedence)
     if register:
-        REGISTRY[name] = fam
+        add(fam)
         _USER.add(name)
     return fam
 
