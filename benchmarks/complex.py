@@ -6,7 +6,7 @@ Usage::
     python benchmarks/complex.py [--instances 20] [--points 4000] [--noise 0.005] [--missing 0.1]
                                  [--families NAMES] [--part-noise 0,0.005] [--jobs 2] [--no-write]
 
-For every complex family of :mod:`houghcad.synth` (a family registered with ``simple = False``
+For every complex family of :mod:`houghcad.synth` (a family registered with ``role = "complex"``
 that has a sampler), ``--instances`` random instances (random pose and scale, Gaussian noise σ =
 ``--noise`` × diagonal, ``--missing`` of the surface cut away as one region) go through
 ``houghcad.segment(points, families="all")``. An instance passes when
@@ -58,7 +58,7 @@ def complex_families() -> list[str]:
     from houghcad import synth
     from houghcad.families import REGISTRY
 
-    return [n for n, f in REGISTRY.items() if not f.simple and n in synth.SAMPLERS]
+    return [n for n, f in REGISTRY.items() if f.role == "complex" and n in synth.SAMPLERS]
 
 
 def _keys(family: str, truth: dict) -> list[str]:
@@ -166,7 +166,7 @@ def run_part(args):
     from houghcad.families import REGISTRY
 
     cloud, res, dt, m = segment_part(name, seed, n_points, noise, "all")
-    cplx = [s for s in res.segments if s.type in REGISTRY and not REGISTRY[s.type].simple]
+    cplx = [s for s in res.segments if s.type in REGISTRY and REGISTRY[s.type].role == "complex"]
     worst = max(cplx, key=lambda s: s.mfe) if cplx else None
     # MFE is relative to the segment's own bounding-box diagonal, while the noise is relative to the
     # part's: the exact surface fits Gaussian noise to a mean distance of sqrt(2/π) σ, so a small face

@@ -40,9 +40,10 @@ def test_sampler_is_area_uniform():
     rng = np.random.default_rng(3)
     shape = {"r_inner": 0.3, "r_outer": 1.0, "c": 0.12, "v_range": (0.0, 4 * np.pi)}
     P, _ = synth.sample_helical_strip(rng, 200000, **shape)
+    strip = synth.SAMPLERS["helical_strip"]
     rho = np.hypot(P[:, 0], P[:, 1])
     # Fraction below the mid radius vs the area ratio.
-    half = synth._helical_strip_area(0.3, 0.65, 0.12, (0.0, 4 * np.pi)) / synth._helical_strip_area(**shape)
+    half = strip.area(0.3, 0.65, 0.12, (0.0, 4 * np.pi)) / strip.area(**shape)
     assert abs(np.mean(rho < 0.65) - half) < 0.005
 
 

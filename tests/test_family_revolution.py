@@ -121,13 +121,13 @@ def test_batched_three_by_three_solve_matches_the_pseudo_inverse():
     A = rng.normal(size=(40, 30, 3, 3))
     b = rng.normal(size=(40, 30, 3))
     A[0, 0, 2] = A[0, 0, 1]  # singular: flagged, not solved
-    x, ok = rev._solve_batched(A, b)
+    x, ok = rev.solve_batched(A, b)
     x_ref = np.einsum("...cr,...r->...c", np.linalg.pinv(A), b)
     assert not ok[0, 0]
     assert ok.mean() > 0.99
     np.testing.assert_allclose(x[ok], x_ref[ok], atol=1e-6 * np.abs(x_ref[ok]).max())
     # Other shapes take the pseudo-inverse path.
-    x2, ok2 = rev._solve_batched(A[..., :2, :], b[..., :2])
+    x2, ok2 = rev.solve_batched(A[..., :2, :], b[..., :2])
     assert x2.shape == (40, 30, 3) and ok2.shape == (40, 30)
 
 

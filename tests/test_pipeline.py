@@ -368,8 +368,8 @@ class _Strip(Family):
 
     name = "test_strip"
     refines = "plane"
-    complexity = 9
-    simple = False
+    precedence = 9
+    role = "complex"
 
     def __init__(self, accept: bool):
         self.accept, self.calls = accept, 0

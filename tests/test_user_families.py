@@ -257,6 +257,7 @@ def test_user_family_is_selectable_by_name_and_unknown_names_still_error(familie
     ({"placement": "sideways"}, "unknown placement"),
     ({"bounds": {"q": (0, 1)}}, "unknown parameters"),
     ({"x": sp.cos(k * u), "y": sp.sin(k * u), "z": sp.exp(h * v)}, "linearly"),
+    ({"search": "global"}, "search must be one of"),
 ])
 def test_bad_definitions_give_clear_errors(families, kwargs, message):
     spec = dict(name="bad_family", x=u * sp.cos(v), y=u * sp.sin(v), z=k * u**2 + h, params=[k, h], u_range=None,
@@ -265,6 +266,26 @@ def test_bad_definitions_give_clear_errors(families, kwargs, message):
     with pytest.raises(InputError, match=message):
         families(spec.pop("name"), **spec)
     assert "cylinder" in REGISTRY and REGISTRY["cylinder"].name == "cylinder"
+
+
+def test_search_and_precedence_are_declared_like_a_family_file(families):
+    """define_family's search/precedence are the protocol's attributes; user families come after
+    the built-in ones in the registry, have no colour or type code, and are complex."""
+    fam = paraboloid(families, "shallow_bowl")
+    assert (fam.role, fam.search, fam.precedence) == ("complex", "whole", 10)
+    assert (fam.color, fam.type_code, fam.sampler) == (None, None, None)
+    other = ellipsoid(families, "flat_egg")
+    assert list(REGISTRY)[-2:] == ["shallow_bowl", "flat_egg"]
+    deep = paraboloid(families, "deep_bowl")
+    deep_cluster = families("deep_bowl", x=u * sp.cos(v), y=u * sp.sin(v), z=k * u**2 + h, params=[k, h],
+                            u_range=None, v_range=(0, 2 * sp.pi), search="cluster", precedence=3)
+    assert (deep_cluster.search, deep_cluster.precedence) == ("cluster", 3)
+    assert REGISTRY["deep_bowl"] is deep_cluster is not deep
+    assert list(REGISTRY)[-3:] == ["shallow_bowl", "flat_egg", "deep_bowl"]  # redefined in place
+    assert other.name not in [f.name for f in select("simple")]
+    with pytest.raises(TypeError):
+        houghcad.define_family("old_style", x=u, y=v, z=k, params=[k], u_range=(0, 1), v_range=(0, 1),
+                               global_search=False)
 
 
 # --------------------------------------------------------------------------- command line

@@ -36,10 +36,10 @@ def consolidate(seg: Segmentation, families: list[Family], ctx: Context) -> None
     """
     if len(seg) < 2:
         return
-    cplx = [f for f in families if not f.simple]
+    cplx = [f for f in families if f.role == "complex"]
     # Only noise lets simpler families slice a cone or torus in the
     # whole-cloud round (on clean samples evaluate()'s gate rejects slices).
-    per_cluster = [f for f in families if f.simple and not f.global_search] if ctx.noisy else []
+    per_cluster = [f for f in families if f.role == "simple" and f.search == "cluster"] if ctx.noisy else []
     if ctx.noisy:
         revisit_poor_fits(seg, families, ctx)
     _revote_groups(seg, cplx, per_cluster, ctx)
@@ -102,8 +102,8 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, e
             if got:
                 cover.append((max(cost(c, s.indices), least), c, got[0][1]))
         best = None
-        for e, c, q in sorted(cover, key=lambda t: (t[1].family.complexity, t[0])):
-            if best is None or (e < 0.5 * best[0] if c.family.complexity > best[1].family.complexity else e < best[0]):
+        for e, c, q in sorted(cover, key=lambda t: (t[1].family.precedence, t[0])):
+            if best is None or (e < 0.5 * best[0] if c.family.precedence > best[1].family.precedence else e < best[0]):
                 best = (e, c, q)
         if best is None:
             continue
@@ -111,7 +111,7 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, e
         # Against the segment's own primitive on the candidate's share only:
         # the rest may be another surface, which no one primitive explains.
         mine, theirs = max(cost(c, c.indices), least), max(cost(s, c.indices), least)
-        if mine >= (0.5 if c.family.complexity > s.family.complexity else 1.0) * theirs:
+        if mine >= (0.5 if c.family.precedence > s.family.precedence else 1.0) * theirs:
             continue
         new = _union(c, [q], P)
         seg.set_points(k, new.indices)
@@ -258,12 +258,12 @@ def merge_complex(seg: Segmentation, ctx: Context, rounds: int = 10) -> None:
         segs: list[SegmentView | Candidate | None] = list(seg)
         for i in order:
             c = segs[i]
-            if c is None or (c.family.simple and not ctx.noisy):
+            if c is None or (c.family.role == "simple" and not ctx.noisy):
                 continue
             nbrs = np.unique(np.r_[edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]])
             # A cone or torus piece may be the smallest of its surface's pieces
             # (the slices came first); a complex segment takes only smaller ones.
-            bound = np.inf if c.family.simple else len(c.indices)
+            bound = np.inf if c.family.role == "simple" else len(c.indices)
             nbrs = [j for j in nbrs.tolist() if segs[j] is not None and len(segs[j].indices) <= bound]
             if not nbrs:
                 continue
@@ -273,7 +273,7 @@ def merge_complex(seg: Segmentation, ctx: Context, rounds: int = 10) -> None:
             key = (len(c.indices), int(c.indices[0]), *(int(segs[j].indices[0]) for j in rest))
             # (A segment of a whole-cloud family, found on a whole face, has
             # firm parameters: it only takes what it covers.)
-            if rest and key not in tried and not (c.family.simple and c.family.global_search):
+            if rest and key not in tried and not (c.family.role == "simple" and c.family.search == "whole"):
                 tried.add(key)
                 # Pieces fitted apart on small patches have loose parameters:
                 # vote the family again on them and the segment.
@@ -308,7 +308,7 @@ def _simple_suffices(pieces: list[Candidate], ctx: Context) -> bool:
     idx = np.concatenate([s.indices for s in pieces])
     sel = idx[np.sort(np.random.default_rng(ctx.seed).choice(len(idx), min(len(idx), 600), replace=False))]
     for s in sorted(pieces, key=lambda s: -len(s.indices)):
-        if not s.family.simple:
+        if s.family.role != "simple":
             continue
         prim = s.family.fit(s.prim, ctx.pre.points[sel], ctx.pre.normals[sel])
         if prim is None or not s.family.valid(prim, ctx):

@@ -6,58 +6,39 @@ take their colours from here, so a cylinder is the same green everywhere.
 
 Colours follow the paper's figures: planes red, cylinders green, cones blue,
 spheres magenta, tori black; the complex families have their own colours and
-unsegmented points are yellow.  The segments of one type get distinct shades
-of the type colour (:func:`segment_colors`), deterministic in the segment id.
+unsegmented points are yellow. Each family declares its colour and PLY type
+code in its own file (:attr:`houghcad.families.Family.color`, ``type_code``);
+the tables here are live views of the registered families. The segments of
+one type get distinct shades of the type colour (:func:`segment_colors`),
+deterministic in the segment id.
 """
 
 from __future__ import annotations
 
 import colorsys
 import functools
+from collections.abc import Mapping
 
 import numpy as np
 
+from .families import FamilyTable
 from .result import Result
 
 __all__ = ["TYPE_CODES", "TYPE_COLORS", "UNSEGMENTED_COLOR", "OTHER_COLOR", "type_code", "type_color",
            "GROUP_COLORS", "NO_GROUP_COLOR", "group_color", "segment_colors", "point_colors", "point_type_codes", "hex_color", "types_present"]
 
-#: Integer code of each family in the PLY ``type`` field (-1: unsegmented, 0: unknown family).
-TYPE_CODES: dict[str, int] = {
-    "plane": 1,
-    "cylinder": 2,
-    "cone": 3,
-    "sphere": 4,
-    "torus": 5,
-    "ellipsoid": 6,
-    "generalized_cylinder": 7,
-    "generalized_cone": 8,
-    "surface_of_revolution": 9,
-    "helical_surface": 10,
-    "helical_strip": 11,
-    "annulus": 12,
-}
+#: Integer code of each family in the PLY ``type`` field (:attr:`Family.type_code`; -1: unsegmented,
+#: 0: a family without a code). A live view of the registered families.
+TYPE_CODES: Mapping[str, int] = FamilyTable("type_code")
 UNSEGMENTED_CODE = -1
 OTHER_CODE = 0
 
-#: Base colour (uint8 RGB) of each family; the first shade of a type is exactly this colour.
-TYPE_COLORS: dict[str, tuple[int, int, int]] = {
-    "plane": (228, 26, 28),             # red
-    "cylinder": (30, 160, 45),          # green
-    "cone": (35, 70, 230),              # blue
-    "sphere": (200, 40, 200),           # magenta
-    "torus": (0, 0, 0),                 # black
-    "ellipsoid": (255, 140, 0),         # orange
-    "generalized_cylinder": (0, 170, 170),   # teal
-    "generalized_cone": (128, 128, 0),       # olive
-    "surface_of_revolution": (255, 110, 180),  # pink
-    "helical_surface": (140, 80, 30),   # brown
-    "helical_strip": (110, 60, 200),    # violet
-    "annulus": (128, 128, 128),         # grey
-}
+#: Base colour (uint8 RGB) of each family (:attr:`Family.color`); the first shade of a type is
+#: exactly this colour. A live view of the registered families.
+TYPE_COLORS: Mapping[str, tuple[int, int, int]] = FamilyTable("color")
 #: Points no segment explains.
 UNSEGMENTED_COLOR: tuple[int, int, int] = (255, 215, 0)  # yellow
-#: A family this palette does not know (a plug-in family).
+#: A family without a colour of its own, or not registered.
 OTHER_COLOR: tuple[int, int, int] = (190, 190, 190)  # light grey
 
 #: Colours of the association groups (cycled by group id), distinct from one another;

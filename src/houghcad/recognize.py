@@ -153,7 +153,7 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
         H = smooth(accumulate(grid, voter, vals), grid.wrap)
         # A complex family's candidate costs tens of milliseconds of nonlinear
         # fits; its surface is one of the most persistent peaks.
-        cap = ctx.max_peaks if fam.simple else min(ctx.max_peaks, COMPLEX_MAX_PEAKS)
+        cap = ctx.max_peaks if fam.role == "simple" else min(ctx.max_peaks, COMPLEX_MAX_PEAKS)
         pk, _ = persistent_peaks(H, ctx.persistence, grid.wrap, max_peaks=cap)
         pk = pk[H.ravel()[pk] >= ctx.min_votes]
         if fam.stacked and not ctx.local and len(pk):
@@ -317,8 +317,8 @@ def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
 
 def _better(a: Candidate, b: Candidate) -> bool:
     """Whether candidate a should replace b for the same points."""
-    ca, cb = a.family.complexity, b.family.complexity
-    if ca == cb and not (a.family.simple and b.family.simple):
+    ca, cb = a.family.precedence, b.family.precedence
+    if ca == cb and not (a.family.role == b.family.role == "simple"):
         # Two complex candidates (several profiles, placements): a small piece
         # fitted marginally better must not replace one explaining far more.
         def covers(x: Candidate, y: Candidate) -> bool:
@@ -357,7 +357,7 @@ def candidates(idx: np.ndarray, families: list[Family], ctx: Context, avail: np.
         # clouds: there a slice of a cone or torus by a simpler family fits
         # within the noise, the tangent-slice gate of evaluate() cannot
         # reject it, and only the whole surface's candidate can beat it.
-        if not (ctx.local or fam.global_search or (ctx.noisy and fam.simple)):
+        if not (ctx.local or fam.search == "whole" or (ctx.noisy and fam.role == "simple")):
             continue
         for prim, coarse in propose(fam, idx, ctx):
             cands.extend(evaluate(fam, prim, idx, ctx, coarse))

@@ -226,7 +226,8 @@ class Result:
 
 
 def _jsonable(x: Any) -> Any:
-    """Convert numpy scalars and arrays inside nested containers to plain Python."""
+    """Convert numpy scalars and arrays inside nested containers to plain Python,
+    and :class:`~houghcad.families.Family` objects to their names."""
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -237,4 +238,10 @@ def _jsonable(x: Any) -> Any:
         return int(x)
     if isinstance(x, np.floating):
         return float(x)
+    if isinstance(x, (str, int, float)) or x is None:
+        return x
+    from .families.base import Family  # lazy: results load without the families
+
+    if isinstance(x, Family) or (isinstance(x, type) and issubclass(x, Family)):
+        return x.name  # Segmenter(families=[obj]) records the family by name
     return x

@@ -20,6 +20,8 @@ docs/family-annulus.md.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares, minimize
 from scipy.special import ndtr
@@ -28,6 +30,7 @@ from scipy.spatial import cKDTree
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import REGISTRY, Frame, Family, Placement, Primitive, register, regular_indices, tangent_basis, unit
+from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 from .cylinder import circle_centers
 from ._helix import band_edges
 
@@ -240,14 +243,56 @@ def _plane_coords(P: np.ndarray, ref_normal):
     return m, n, e1, e2, np.stack([D @ e1, D @ e2], axis=1), float(np.sqrt(np.mean((D @ n) ** 2)))
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_annulus(
+    rng: np.random.Generator,
+    n: int,
+    r_inner: float,
+    r_outer: float,
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the planar annulus r_inner ≤ ρ ≤ r_outer of z = 0 (azimuth in ``arc``).
+
+    ρ² is uniform. Returns points (n, 3) and normals (n, 3) (all +z).
+    """
+    if not r_outer > r_inner >= 0:
+        raise ValueError("annulus needs r_outer > r_inner ≥ 0")
+    a0, a1 = span(arc)
+    rho = np.sqrt(r_inner**2 + rng.random(n) * (r_outer**2 - r_inner**2))
+    th = a0 + (a1 - a0) * rng.random(n)
+    pts = np.column_stack([rho * np.cos(th), rho * np.sin(th), np.zeros(n)])
+    nrm = np.zeros((n, 3))
+    nrm[:, 2] = 1.0
+    return pts, nrm
+
+
+def _annulus_area(r_inner: float, r_outer: float, arc: tuple[float, float] = (0.0, TAU)) -> float:
+    return float(0.5 * (arc[1] - arc[0]) * (r_outer**2 - r_inner**2))
+
+
+def _annulus_local(r_inner: float, r_outer: float, **_: Any) -> dict[str, Any]:
+    return {"center": list(ORIGIN), "normal": list(Z_AXIS), "r_inner": float(r_inner), "r_outer": float(r_outer)}
+
+
+def _annulus_random(rng: np.random.Generator) -> dict[str, Any]:
+    a = float(rng.uniform(0.6, 1.2))
+    return {"r_inner": a * float(rng.uniform(0.3, 0.7)), "r_outer": a, "arc": partial(rng, 0.7, np.pi, 1.7 * np.pi)}
+
+
 @register
 class Annulus(Family):
     name = "annulus"
     param_names = ("center", "normal", "r_inner", "r_outer")
     n_unknowns = 1
-    complexity = 7
-    simple = False
-    global_search = False
+    role = "complex"
+    precedence = 7
+    search = "cluster"
+    order = 100
+    color = (128, 128, 128)  # grey
+    type_code = 12
+    sampler = Sampler(sample_annulus, _annulus_area, _annulus_local, _annulus_random,
+                      {"center": "point", "normal": "direction", "r_inner": "length", "r_outer": "length"})
     refines = "plane"
 
     # --- standard form and voting -------------------------------------------

@@ -15,19 +15,35 @@ A family is one file: a subclass of :class:`Family` registered with
   have that shape;
 - ``to_world`` and ``descriptors``.
 
+and declares, as class attributes, how the rest of houghcad treats it: its
+``role`` ("simple" or "complex"), ``precedence`` (ties), ``search`` (whole
+cloud or per cluster), ``order`` (place in the registry, which is the voting
+order), its ``color`` and PLY ``type_code`` in the pictures, and its
+synthetic ``sampler`` (:class:`Sampler`, for :mod:`houghcad.synth`).
+
 Everything a family computes before ``to_world`` is in the cloud's
 *standard* frame (see :mod:`houghcad.preprocess`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
+from ..errors import InputError
 from ..hough import Grid
 from ..preprocess import Similarity
+from ._sampling import Sampler
+
+#: Values of :attr:`Family.role`.
+ROLES = ("simple", "complex")
+#: Values of :attr:`Family.search`.
+SEARCHES = ("whole", "cluster")
+#: Words of ``families=...`` that are not family names.
+SELECTION_WORDS = ("simple", "all")
 
 
 @dataclass
@@ -87,12 +103,49 @@ class Family:
     param_names: ClassVar[tuple[str, ...]] = ()
     #: Number of unknowns voted in standard form.
     n_unknowns: ClassVar[int] = 1
-    #: Rank for ties: simpler families win equal fits.
-    complexity: ClassVar[int] = 0
-    #: Whether the family belongs to the ``simple`` selection.
-    simple: ClassVar[bool] = True
-    #: Whether it is sought on the whole cloud in the first round.
-    global_search: ClassVar[bool] = True
+    #: ``"simple"``: one of the paper's five families (plane, cylinder, cone,
+    #: sphere, torus), selected by ``families="simple"`` (the default). Their
+    #: ties are settled by fitting error alone, and on noisy clouds the
+    #: per-cluster ones also join the whole-cloud round. ``"complex"``: voted
+    #: only when selected by name or ``"all"``; it evaluates fewer peaks per
+    #: placement (they cost nonlinear fits), must clearly beat a simple
+    #: candidate to replace it, and re-votes the groups of simple segments
+    #: that may be slices of its surface (consolidation).
+    role: ClassVar[str] = "complex"
+    #: Rank for ties between families (the paper's "simpler family wins"):
+    #: the lower wins equal fits, and a family of higher precedence must
+    #: halve the other's fitting error to replace it. Built-in: plane 0,
+    #: cylinder 1, sphere 2, cone 3, torus 4, ellipsoid 5, generalised
+    #: cylinder 6, generalised cone, annulus and surface of revolution 7,
+    #: helical strip 8, helical surface 9; user families 10.
+    precedence: ClassVar[int] = 10
+    #: Where the family is voted. ``"whole"``: on the whole cloud in the first
+    #: round, then per cluster in the splitting phase. ``"cluster"``: only per
+    #: cluster: a family whose standard-form placement needs the normals of
+    #: one surface (a cone's apex where its tangent planes meet, a torus's
+    #: centre where its normal lines meet in the meridian plane) cannot be
+    #: placed from the normals of a whole part, which belong to many surfaces.
+    #: (On noisy clouds simple ``"cluster"`` families join the first round
+    #: too: a simpler family's slice of their surface fits within the noise,
+    #: and only the whole surface's candidate can beat it.)
+    search: ClassVar[str] = "whole"
+    #: Place in the registry, which is the order families are voted and
+    #: candidates listed (it settles exact ties): lower first. The built-in
+    #: families use multiples of 10 (plane 10 … surface of revolution 120);
+    #: families registered later with the same order follow them.
+    order: ClassVar[int] = 1000
+    #: Base colour (uint8 RGB) of the family's segments in every picture:
+    #: the first shade of the type (:mod:`houghcad.palette`). None: the
+    #: palette's ``OTHER_COLOR``.
+    color: ClassVar[tuple[int, int, int] | None] = None
+    #: Code of the family in the ``type`` field of the coloured PLY: a
+    #: positive integer unique among the registered families (-1 is
+    #: "unsegmented", 0 "unknown family"). None: 0.
+    type_code: ClassVar[int | None] = None
+    #: How :mod:`houghcad.synth` samples the family (area-uniform points of a
+    #: patch in the standard frame, its area, its parameters, random shapes);
+    #: None: the family has no synthetic sampler.
+    sampler: ClassVar[Sampler | None] = None
     #: Whether surfaces of the family often share one placement at several
     #: sizes (the sections of a stepped shaft on one axis and directrix):
     #: the whole-cloud vote then also seeks peaks beside the top one.
@@ -183,14 +236,100 @@ class Family:
         """Placement descriptors: axis line, centre, normal, apex (standard frame)."""
         return None
 
+    def __repr__(self) -> str:
+        # Deterministic (no address): reports and options print families.
+        return f"{type(self).__name__}({self.name!r})"
 
+
+#: Registered families by name, in :attr:`Family.order` (stable: equal orders
+#: keep the order of registration). The families of this package register
+#: when it is imported; the others when their module is imported, when
+#: :func:`houghcad.families.select` meets them, or through
+#: :func:`houghcad.families.define_family`.
 REGISTRY: dict[str, Family] = {}
 
 
+def check(fam: Family) -> None:
+    """Raise :class:`InputError` when a family's declared attributes are not
+    valid (name, role, search, colour, type code, sampler)."""
+    if not isinstance(fam.name, str) or not fam.name:
+        raise InputError(f"{type(fam).__name__}: a family needs a non-empty name")
+    if fam.name in SELECTION_WORDS:
+        raise InputError(f"{fam.name!r} names a selection of families, not a family")
+    if fam.role not in ROLES:
+        raise InputError(f"family {fam.name!r}: role must be one of {ROLES}, got {fam.role!r}")
+    if fam.search not in SEARCHES:
+        raise InputError(f"family {fam.name!r}: search must be one of {SEARCHES}, got {fam.search!r}")
+    c = fam.color
+    if c is not None and not (isinstance(c, tuple) and len(c) == 3
+                              and all(isinstance(x, int) and 0 <= x <= 255 for x in c)):
+        raise InputError(f"family {fam.name!r}: color must be None or three ints in 0..255, got {c!r}")
+    code = fam.type_code
+    if code is not None and not (isinstance(code, int) and code >= 1):
+        raise InputError(f"family {fam.name!r}: type_code must be None or an int >= 1, got {code!r}")
+    if fam.sampler is not None and not isinstance(fam.sampler, Sampler):
+        raise InputError(f"family {fam.name!r}: sampler must be None or a Sampler, got {fam.sampler!r}")
+
+
+def add(fam: Family) -> Family:
+    """Put a family (an instance) in :data:`REGISTRY` under its name, replacing
+    one of that name, and keep the registry in :attr:`Family.order`.
+
+    Raises :class:`InputError` when its attributes are invalid (:func:`check`)
+    or its type code belongs to another registered family (the PLY ``type``
+    field must name one family).
+    """
+    check(fam)
+    if fam.type_code is not None:
+        taken = [n for n, f in REGISTRY.items() if f.type_code == fam.type_code and n != fam.name]
+        if taken:
+            raise InputError(f"family {fam.name!r}: type_code {fam.type_code} is taken by {taken[0]!r}")
+    REGISTRY[fam.name] = fam
+    ordered = sorted(REGISTRY.items(), key=lambda kv: kv[1].order)  # stable
+    REGISTRY.clear()
+    REGISTRY.update(ordered)
+    return fam
+
+
 def register(cls: type[Family]) -> type[Family]:
-    """Class decorator adding a family to the registry."""
-    REGISTRY[cls.name] = cls()
+    """Class decorator adding a family (an instance of ``cls``) to the registry."""
+    add(cls())
     return cls
+
+
+def unregister(name: str) -> Family | None:
+    """Remove the family ``name`` from the registry; returns it (None when absent)."""
+    return REGISTRY.pop(name, None)
+
+
+V = TypeVar("V")
+
+
+class FamilyTable(Mapping[str, V]):
+    """A read-only, live view of one attribute of the registered families:
+    name → value in registry order, leaving out the families where it is None.
+
+    Tables built from it (the palette's colours and type codes, synth's
+    samplers) follow the registry as families are added or removed.
+    """
+
+    def __init__(self, attribute: str):
+        self.attribute = attribute
+
+    def __getitem__(self, name: str) -> V:
+        value = getattr(REGISTRY[name], self.attribute)
+        if value is None:
+            raise KeyError(name)
+        return value
+
+    def __iter__(self) -> Iterator[str]:
+        return iter([n for n, f in REGISTRY.items() if getattr(f, self.attribute) is not None])
+
+    def __len__(self) -> int:
+        return sum(getattr(f, self.attribute) is not None for f in REGISTRY.values())
+
+    def __repr__(self) -> str:
+        return f"FamilyTable({self.attribute!r}, {dict(self)!r})"
 
 
 # --- small geometric helpers shared by the families ---------------------------

@@ -3,6 +3,8 @@ unknowns (b, α) once the axis is along z."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -10,6 +12,7 @@ from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, radial,
                    register, tangent_basis, unit)
+from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
 
 
 def cone_frame(P, N):
@@ -27,13 +30,63 @@ def cone_frame(P, N):
     return apex, a
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_cone(
+    rng: np.random.Generator,
+    n: int,
+    half_angle: float,
+    z_range: tuple[float, float],
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the cone x² + y² = (z tan α)², apex at the origin, opening towards +z.
+
+    ``z_range = (z0, z1)`` (0 ≤ z0 < z1, units) bounds the patch along the axis, measured from
+    the apex. The area element is proportional to z, so z is drawn by inverse CDF
+    (z² uniform). Returns points (n, 3) and outward unit normals (n, 3)
+    ``(cos α cos θ, cos α sin θ, −sin α)``.
+    """
+    z0, z1 = span(z_range)
+    if z0 < 0:
+        raise ValueError("cone z_range must be on the opening side of the apex (z ≥ 0)")
+    a0, a1 = span(arc)
+    z = np.sqrt(z0 * z0 + rng.random(n) * (z1 * z1 - z0 * z0))
+    th = a0 + (a1 - a0) * rng.random(n)
+    c, s = np.cos(th), np.sin(th)
+    r = z * np.tan(half_angle)
+    pts = np.column_stack([r * c, r * s, z])
+    ca, sa = np.cos(half_angle), np.sin(half_angle)
+    nrm = np.column_stack([ca * c, ca * s, np.full(n, -sa)])
+    return pts, nrm
+
+
+def _cone_area(half_angle: float, z_range: tuple[float, float], arc: tuple[float, float] = (0.0, TAU)) -> float:
+    return float((arc[1] - arc[0]) * np.tan(half_angle) / np.cos(half_angle) * (z_range[1] ** 2 - z_range[0] ** 2) / 2)
+
+
+def _cone_local(half_angle: float, **_: Any) -> dict[str, Any]:
+    return {"apex": list(ORIGIN), "axis": list(Z_AXIS), "half_angle": float(half_angle)}
+
+
+def _cone_random(rng: np.random.Generator) -> dict[str, Any]:
+    alpha = float(np.deg2rad(rng.uniform(15.0, 60.0)))
+    z1 = float(rng.uniform(0.6, 1.2)) / np.tan(alpha)  # radius 0.6-1.2 at the wide end
+    return {"half_angle": alpha, "z_range": (z1 * float(rng.uniform(0.1, 0.5)), z1)}
+
+
 @register
 class Cone(Family):
     name = "cone"
     param_names = ("apex", "axis", "half_angle")
     n_unknowns = 2
-    complexity = 3
-    global_search = False
+    role = "simple"
+    precedence = 3
+    search = "cluster"
+    order = 40
+    color = (35, 70, 230)  # blue
+    type_code = 3
+    sampler = Sampler(sample_cone, _cone_area, _cone_local, _cone_random,
+                      {"apex": "point", "axis": "direction", "half_angle": "invariant"})
 
     def placements(self, P, N, ctx):
         out = []

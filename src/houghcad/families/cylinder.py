@@ -3,11 +3,14 @@ is along z through the origin."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..hough import Grid, direction_accumulator, normal_line_peaks, refine_direction
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Placement, Primitive, gauss_newton, radial, register, tangent_basis, unit
+from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 
 def axis_candidates(P, N, ctx, max_dirs):
@@ -44,12 +47,54 @@ def circle_centers(Q, M, ctx, max_centers):
     return normal_line_peaks(Q, M, lo, ext, nb, 0.5 * ext * 1.05, ctx.persistence, ctx.min_votes, max_centers)
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_cylinder(
+    rng: np.random.Generator,
+    n: int,
+    radius: float,
+    height: float,
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on x² + y² = radius², -height/2 ≤ z ≤ height/2, azimuth in ``arc`` (rad).
+
+    Returns points (n, 3) and outward unit normals (n, 3).
+    """
+    a0, a1 = span(arc)
+    th = a0 + (a1 - a0) * rng.random(n)
+    z = (rng.random(n) - 0.5) * float(height)
+    c, s = np.cos(th), np.sin(th)
+    pts = np.column_stack([radius * c, radius * s, z])
+    nrm = np.column_stack([c, s, np.zeros(n)])
+    return pts, nrm
+
+
+def _cylinder_area(radius: float, height: float, arc: tuple[float, float] = (0.0, TAU)) -> float:
+    return float(radius * (arc[1] - arc[0]) * height)
+
+
+def _cylinder_local(radius: float, **_: Any) -> dict[str, Any]:
+    return {"axis_point": list(ORIGIN), "axis": list(Z_AXIS), "radius": float(radius)}
+
+
+def _cylinder_random(rng: np.random.Generator) -> dict[str, Any]:
+    r = float(rng.uniform(0.4, 1.0))
+    return {"radius": r, "height": r * float(rng.uniform(1.0, 3.0)), "arc": partial(rng, 0.6, np.pi / 2, 1.6 * np.pi)}
+
+
 @register
 class Cylinder(Family):
     name = "cylinder"
     param_names = ("axis_point", "axis", "radius")
     n_unknowns = 1
-    complexity = 1
+    role = "simple"
+    precedence = 1
+    search = "whole"
+    order = 20
+    color = (30, 160, 45)  # green
+    type_code = 2
+    sampler = Sampler(sample_cylinder, _cylinder_area, _cylinder_local, _cylinder_random,
+                      {"axis_point": "point", "axis": "direction", "radius": "length"})
 
     def placements(self, P, N, ctx):
         out = []

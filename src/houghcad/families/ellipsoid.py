@@ -18,6 +18,8 @@ Near-spheres (all semi-axes equal within :data:`SPHERE_TOL`) are rejected by
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
@@ -26,6 +28,7 @@ from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, frame_turn_rows, radial,
                    register, regular_indices, tangent_basis, unit)
+from ._sampling import ORIGIN, TAU, Array, Sampler, span
 
 #: Relative spread (max − min) / max of the semi-axes below which the shape is a sphere.
 SPHERE_TOL = 0.05
@@ -151,14 +154,97 @@ def distinguished_axis(semi: np.ndarray) -> int:
     return int(np.argmax(gaps))
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def _ellipsoid_grid(semi_axes: Any, polar_range: tuple[float, float], arc: tuple[float, float],
+                    nu: int = 400, nt: int = 400) -> tuple[Array, Array]:
+    """Midpoint grid of the unit-sphere patch (cos polar uniform, azimuth uniform) and the
+    ellipsoid's area density per unit solid angle at each node, e0 e1 e2 · |s / e|."""
+    e = np.asarray(semi_axes, float)
+    c0, c1 = np.cos(polar_range[1]), np.cos(polar_range[0])
+    uu = c0 + (c1 - c0) * (np.arange(nu) + 0.5) / nu
+    tt = arc[0] + (arc[1] - arc[0]) * (np.arange(nt) + 0.5) / nt
+    U, Tt = np.meshgrid(uu, tt, indexing="ij")
+    rho = np.sqrt(np.clip(1 - U * U, 0, None))
+    S = np.stack([rho * np.cos(Tt), rho * np.sin(Tt), U], -1).reshape(-1, 3)
+    return S, float(np.prod(e)) * np.linalg.norm(S / e, axis=1)
+
+
+def sample_ellipsoid(
+    rng: np.random.Generator,
+    n: int,
+    semi_axes: Any = (1.0, 1.0, 0.5),
+    polar_range: tuple[float, float] = (0.0, np.pi),
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Area-uniform points on the ellipsoid Σ (x_k / e_k)² = 1 centred at the origin, axes x, y, z.
+
+    ``polar_range`` (rad) bounds the angle from +z of the unit-sphere point s that maps to
+    x = e ∘ s, ``arc`` its azimuth. The map's area factor e0 e1 e2 |s / e| is honoured by importance
+    resampling without replacement from a pool of 10 n uniform sphere points (the factor varies by
+    at most max(e) / min(e), so the pool is far larger than needed; weighted sampling without
+    replacement by the keys U^(1/w), Efraimidis–Spirakis). Returns points (n, 3) and outward unit
+    normals (n, 3).
+    """
+    e = np.asarray(semi_axes, float)
+    p0, p1 = span(polar_range)
+    a0, a1 = span(arc)
+    m = 10 * int(n)
+    u = np.cos(p1) + (np.cos(p0) - np.cos(p1)) * rng.random(m)
+    th = a0 + (a1 - a0) * rng.random(m)
+    rho = np.sqrt(np.clip(1.0 - u * u, 0.0, None))
+    S = np.column_stack([rho * np.cos(th), rho * np.sin(th), u])
+    w = np.linalg.norm(S / e, axis=1)
+    keys = np.log(rng.random(m)) / w
+    pick = np.argpartition(-keys, int(n) - 1)[: int(n)] if n < m else np.arange(m)
+    S = S[pick]
+    nrm = S / e
+    return S * e, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+
+
+def _ellipsoid_area(semi_axes: Any = (1.0, 1.0, 0.5), polar_range: tuple[float, float] = (0.0, np.pi),
+                    arc: tuple[float, float] = (0.0, TAU)) -> float:
+    """Area by the midpoint rule on a 400 × 400 grid of the sphere patch (deterministic)."""
+    _, dens = _ellipsoid_grid(semi_axes, polar_range, arc)
+    solid = (np.cos(polar_range[0]) - np.cos(polar_range[1])) * (arc[1] - arc[0])
+    return float(dens.mean() * solid)
+
+
+def _ellipsoid_local(semi_axes: Any = (1.0, 1.0, 0.5), **_: Any) -> dict[str, Any]:
+    e = np.asarray(semi_axes, float)
+    order = np.argsort(e, kind="stable")
+    return {"center": list(ORIGIN), "axis": np.eye(3)[distinguished_axis(e)].tolist(),
+            "semi_axes": e[order].tolist(), "axes": np.eye(3)[order].tolist()}
+
+
+def _ellipsoid_random(rng: np.random.Generator) -> dict[str, Any]:
+    """Of revolution (p, p, q) or with three axes; min/max semi-axis ≤ 0.8; whole or a cap."""
+    if rng.random() < 0.5:
+        p = float(rng.uniform(0.5, 1.0))
+        ratio = float(rng.uniform(0.45, 0.8)) if rng.random() < 0.5 else 1.0 / float(rng.uniform(0.5, 0.8))
+        e = [p, p, p * ratio]
+    else:
+        e0 = float(rng.uniform(0.5, 0.8))
+        e1 = e0 * float(rng.uniform(1.2, 1.5))
+        e = [e0, e1, e1 * float(rng.uniform(1.2, 1.5))]
+        e = [e[k] for k in rng.permutation(3)]
+    cap = (0.0, np.pi) if rng.random() < 0.6 else (0.0, float(rng.uniform(0.6 * np.pi, 0.85 * np.pi)))
+    return {"semi_axes": tuple(e), "polar_range": cap}
+
+
 @register
 class Ellipsoid(Family):
     name = "ellipsoid"
     param_names = ("center", "axis", "semi_axes", "axes")
     n_unknowns = 3
-    complexity = 5
-    simple = False
-    global_search = True
+    role = "complex"
+    precedence = 5
+    search = "whole"
+    order = 110
+    color = (255, 140, 0)  # orange
+    type_code = 6
+    sampler = Sampler(sample_ellipsoid, _ellipsoid_area, _ellipsoid_local, _ellipsoid_random,
+                      {"center": "point", "axis": "direction", "semi_axes": "lengths", "axes": "directions"})
 
     # --- standard form ------------------------------------------------------
     def placements(self, P, N, ctx):

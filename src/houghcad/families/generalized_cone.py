@@ -15,12 +15,15 @@ the order n (swept 2 … 12) and the phase φ, and (b, slope) are voted.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Primitive, frame_turn_rows, planes_intersection, register, unit
+from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, directrix_random, directrix_speed, draw_by_weight, span
 from .generalized_cylinder import (B_MAX, B_MIN, N_VALUES, DirectrixPlacement, active_order, best_order, debias_b,
                                    normalise_shape, phase_frame, polar_fit, polar_local,
                                    polar_rows, ref_basis, vote_grid)
@@ -168,14 +171,76 @@ def ruling_foot(q: np.ndarray, s: float, b: float, n: int, iters: int = 5) -> np
     return u
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_generalized_cone(
+    rng: np.random.Generator, n: int, slope: float, b: float, order: int, z_range: tuple[float, float],
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the generalised cone z (ρ_s(u) cos u, ρ_s(u) sin u, 1), ρ_s = slope / (1 + b cos(order·u)):
+    apex at the origin, opening towards +z, z in ``z_range`` (0 ≤ z0 < z1), u in ``arc``.
+
+    This is the paper's x = a v cos u / (1 + b cos nu), y = a v sin u / (1 + b cos nu), z = A v + B
+    with A = 1, B = 0 (v = z, a = ``slope``). With D(u) = (ρ_s e(u), 1) the area element is
+    z |D(u) × D'(u)| du dz: separable, z drawn with density ∝ z, u with density ∝ |D × D'|.
+    Returns points (n, 3) and outward unit normals (n, 3) (∝ D' × D).
+    """
+    z0, z1 = span(z_range)
+    if z0 < 0:
+        raise ValueError("generalised cone z_range must be on the opening side of the apex (z ≥ 0)")
+    a0, a1 = span(arc)
+    u = draw_by_weight(rng, n, lambda t: np.linalg.norm(_gcone_cross(t, slope, b, order), axis=1), a0, a1)
+    z = np.sqrt(z0 * z0 + rng.random(n) * (z1 * z1 - z0 * z0))
+    r = directrix_speed(u, slope, b, order)[0]
+    pts = np.column_stack([z * r * np.cos(u), z * r * np.sin(u), z])
+    nrm = _gcone_cross(u, slope, b, order)
+    return pts, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+
+
+def _gcone_cross(u: Array, slope: float, b: float, order: int) -> Array:
+    """D'(u) × D(u), (m, 3): an outward normal of the generalised cone along the ruling D(u)."""
+    r, r1, _ = directrix_speed(u, slope, b, order)
+    c, s = np.cos(u), np.sin(u)
+    D = np.column_stack([r * c, r * s, np.ones_like(u)])
+    D1 = np.column_stack([r1 * c - r * s, r1 * s + r * c, np.zeros_like(u)])
+    return np.cross(D1, D)
+
+
+def _gcone_area(slope: float, b: float, order: int, z_range: tuple[float, float],
+                arc: tuple[float, float] = (0.0, TAU), m: int = 8192) -> float:
+    u = np.linspace(arc[0], arc[1], m + 1)
+    w = np.linalg.norm(_gcone_cross(u, slope, b, order), axis=1)
+    return float(np.sum(0.5 * (w[1:] + w[:-1]) * np.diff(u)) * (z_range[1] ** 2 - z_range[0] ** 2) / 2)
+
+
+def _gcone_local(slope: float, b: float, order: int, **_: Any) -> dict[str, Any]:
+    return {"apex": list(ORIGIN), "axis": list(Z_AXIS), "ref_direction": [1.0, 0.0, 0.0], "a": float(slope),
+            "b": float(b), "n": int(order), "A": 1.0, "B": 0.0}
+
+
+def _gcone_random(rng: np.random.Generator) -> dict[str, Any]:
+    order, b = directrix_random(rng)
+    slope = float(np.tan(np.deg2rad(rng.uniform(20.0, 45.0))))
+    z1 = float(rng.uniform(0.6, 1.2)) / slope  # mean radius 0.6-1.2 at the wide end
+    return {"slope": slope, "b": b, "order": order, "z_range": (z1 * float(rng.uniform(0.2, 0.5)), z1)}
+
+
 @register
 class GeneralizedCone(Family):
     name = "generalized_cone"
     param_names = ("apex", "axis", "ref_direction", "a", "b", "n", "A", "B")
     n_unknowns = 2
-    complexity = 7
-    simple = False
-    global_search = True
+    role = "complex"
+    precedence = 7
+    search = "whole"
+    order = 70
+    color = (128, 128, 0)  # olive
+    type_code = 8
+    sampler = Sampler(sample_generalized_cone, _gcone_area, _gcone_local, _gcone_random,
+                      {"apex": "point", "axis": "direction", "ref_direction": "direction",
+                       # the paper's a with A = 1: ρ/z, no unit
+                       "a": "invariant", "b": "invariant", "n": "invariant",
+                       "A": "invariant", "B": "length"})
 
     # --- standard form -------------------------------------------------------------------
     def placements(self, P, N, ctx):

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from contextvars import ContextVar
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -23,6 +24,8 @@ from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, frame_turn_rows, register, regular_indices,
                    tangent_basis, unit)
+from ._sampling import (ORIGIN, TAU, Z_AXIS, Array, Sampler, directrix_length, directrix_random, directrix_speed,
+                        draw_by_weight, span)
 from .cylinder import axis_candidates
 
 #: Orders of the directrix that are swept.
@@ -253,14 +256,59 @@ def vote_grid(n: int, rho_hi: float, cell: float, rho_typ: float) -> Grid:
     return Grid((n - 0.5, 0.0, 0.0), (n + 0.5, B_MAX, rho_hi), (1, nb, na))
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_generalized_cylinder(
+    rng: np.random.Generator, n: int, a: float, b: float, order: int, height: float,
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the generalised cylinder over ρ(u) = a / (1 + b cos(order·u)),
+    -height/2 ≤ z ≤ height/2, u in ``arc`` (rad).
+
+    Area element |C'(u)| du dz: u is drawn with density ∝ the directrix's speed, z uniformly.
+    Returns points (n, 3) and outward unit normals (n, 3) (the directrix is star-shaped, traversed
+    counter-clockwise, so the outward normal is C' turned by -90°).
+    """
+    a0, a1 = span(arc)
+    u = draw_by_weight(rng, n, lambda t: directrix_speed(t, a, b, order)[2], a0, a1)
+    z = (rng.random(n) - 0.5) * float(height)
+    r, r1, sp = directrix_speed(u, a, b, order)
+    c, s = np.cos(u), np.sin(u)
+    t = np.column_stack([r1 * c - r * s, r1 * s + r * c]) / sp[:, None]  # unit tangent C'/|C'|
+    pts = np.column_stack([r * c, r * s, z])
+    nrm = np.column_stack([t[:, 1], -t[:, 0], np.zeros(n)])
+    return pts, nrm
+
+
+def _gcyl_area(a: float, b: float, order: int, height: float, arc: tuple[float, float] = (0.0, TAU)) -> float:
+    return directrix_length(a, b, order, arc) * float(height)
+
+
+def _gcyl_local(a: float, b: float, order: int, **_: Any) -> dict[str, Any]:
+    return {"axis_point": list(ORIGIN), "axis": list(Z_AXIS), "ref_direction": [1.0, 0.0, 0.0], "a": float(a),
+            "b": float(b), "n": int(order)}
+
+
+def _gcyl_random(rng: np.random.Generator) -> dict[str, Any]:
+    order, b = directrix_random(rng)
+    a = float(rng.uniform(0.4, 1.0))
+    return {"a": a, "b": b, "order": order, "height": a * float(rng.uniform(1.0, 3.0))}
+
+
 @register
 class GeneralizedCylinder(Family):
     name = "generalized_cylinder"
     param_names = ("axis_point", "axis", "ref_direction", "a", "b", "n")
     n_unknowns = 2
-    complexity = 6
-    simple = False
-    global_search = True
+    role = "complex"
+    precedence = 6
+    search = "whole"
+    order = 60
+    color = (0, 170, 170)  # teal
+    type_code = 7
+    sampler = Sampler(sample_generalized_cylinder, _gcyl_area, _gcyl_local, _gcyl_random,
+                      {"axis_point": "point", "axis": "direction", "ref_direction": "direction",
+                       "a": "length", "b": "invariant", "n": "invariant"})
     stacked = True
 
     # --- standard form -------------------------------------------------------------------

@@ -12,11 +12,14 @@ for).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..hough import Grid
 from .base import Frame, Family, Primitive, axis_from_normal_lines, register, tangent_basis, unit
+from ._sampling import ORIGIN, Z_AXIS, Array, Sampler, inverse_cdf, span
 from ._helix import band_edges, cylindrical, frame_axes, gated_screw_placement
 
 TAU = 2.0 * np.pi
@@ -50,17 +53,71 @@ def helicoid_distance(rho: np.ndarray, phi: np.ndarray, z: np.ndarray, c: float,
     return np.sqrt(np.maximum(f, 0.0)), d, r
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_helical_strip(
+    rng: np.random.Generator,
+    n: int,
+    r_inner: float,
+    r_outer: float,
+    c: float,
+    v_range: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the helicoid strip x = ρ cos v, y = ρ sin v, z = c v, r_inner ≤ ρ ≤ r_outer.
+
+    The area element √(c² + ρ²) dρ dv: v uniform, ρ by inverse CDF. Returns points (n, 3) and unit
+    normals (n, 3) ∝ (c sin v, −c cos v, ρ).
+    """
+    if not (r_outer > r_inner >= 0 and c != 0):
+        raise ValueError("helical strip needs r_outer > r_inner ≥ 0 and c ≠ 0")
+    v0, v1 = span(v_range)
+    v = v0 + (v1 - v0) * rng.random(n)
+    g = np.linspace(r_inner, r_outer, 2049)
+    rho = inverse_cdf(rng, n, g, np.sqrt(c * c + g * g))
+    cv, sv = np.cos(v), np.sin(v)
+    pts = np.column_stack([rho * cv, rho * sv, c * v])
+    nrm = np.column_stack([c * sv, -c * cv, rho])
+    return pts, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+
+
+def _helical_strip_area(r_inner: float, r_outer: float, c: float, v_range: tuple[float, float] = (0.0, TAU)) -> float:
+    def F(r: float) -> float:  # ∫ √(c² + r²) dr
+        return 0.5 * (r * np.hypot(c, r) + c * c * np.arcsinh(r / abs(c)))
+
+    return float((v_range[1] - v_range[0]) * (F(r_outer) - F(r_inner)))
+
+
+def _helical_strip_local(r_inner: float, r_outer: float, c: float, **_: Any) -> dict[str, Any]:
+    return {"axis_point": list(ORIGIN), "axis": list(Z_AXIS), "ref_direction": [1.0, 0.0, 0.0],
+            "r_inner": float(r_inner), "r_outer": float(r_outer), "pitch": float(abs(c) * TAU),
+            "handedness": float(np.sign(c))}
+
+
+def _helical_strip_random(rng: np.random.Generator) -> dict[str, Any]:
+    a = float(rng.uniform(0.7, 1.0))
+    c = a * float(rng.uniform(0.5, 1.0)) / TAU * (1 if rng.random() < 0.7 else -1)
+    return {"r_inner": a * float(rng.uniform(0.3, 0.6)), "r_outer": a, "c": c,
+            "v_range": (0.0, TAU * float(rng.uniform(1.0, 3.0)))}
+
+
 @register
 class HelicalStrip(Family):
     name = "helical_strip"
     param_names = ("axis_point", "axis", "ref_direction", "r_inner", "r_outer", "pitch", "handedness")
     n_unknowns = 2
-    complexity = 8
-    simple = False
+    role = "complex"
+    precedence = 8
     #: Sought in the global round too, when the whole cloud's normal lines form
     #: one linear complex: otherwise planes and cylinders take the strip's bands
     #: there (5 noisy single instances: 0/5 recognised, 5/5 with it).
-    global_search = True
+    search = "whole"
+    order = 90
+    color = (110, 60, 200)  # violet
+    type_code = 11
+    sampler = Sampler(sample_helical_strip, _helical_strip_area, _helical_strip_local, _helical_strip_random,
+                      {"axis_point": "point", "axis": "direction", "ref_direction": "direction",
+                       "r_inner": "length", "r_outer": "length", "pitch": "length",
+                       "handedness": "invariant"})
 
     # --- standard form and voting -------------------------------------------
     def placements(self, P, N, ctx):

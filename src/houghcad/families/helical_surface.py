@@ -16,12 +16,15 @@ profile's first harmonic.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from ..hough import Grid
 from .base import Frame, Family, Primitive, axis_from_normal_lines, register, tangent_basis, unit
+from ._sampling import ORIGIN, Z_AXIS, Array, Sampler, inverse_cdf, span
 from ._helix import cylindrical, frame_axes, gated_screw_placement
 
 TAU = 2.0 * np.pi
@@ -46,17 +49,96 @@ def _profile(A, B, psi):
     return A + B * np.cos(psi), -B * np.sin(psi)
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def helical_radius(R1: float, R2: float, u: Array) -> tuple[Array, Array]:
+    """Radius R(u) = R1 + (R2 − R1)(cos u + 1)/2 and its derivative, shapes like u."""
+    return R1 + 0.5 * (R2 - R1) * (np.cos(u) + 1.0), -0.5 * (R2 - R1) * np.sin(u)
+
+
+def _helical_density(R1: float, R2: float, k1: float, starts: int, u: Array) -> Array:
+    """Area element |S_u × S_v| of the helical surface (depends on u only), shape like u."""
+    R, dR = helical_radius(R1, R2, u)
+    return np.sqrt(k1 * k1 * (starts * starts * dR * dR + R * R) + R * R * dR * dR)
+
+
+def sample_helical_surface(
+    rng: np.random.Generator,
+    n: int,
+    R1: float,
+    R2: float,
+    k1: float,
+    starts: int,
+    periods: int,
+    k2: float = 0.0,
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the helical surface z = k1 (u + starts·v) + k2 (see the module docstring),
+    cut to the slab 0 ≤ z < periods · 2π k1 and the azimuth range ``arc`` (rad).
+
+    ``periods`` (integer) whole profile periods make every azimuth carry the same area, so v is
+    uniform; u is drawn by inverse CDF of the area element over one period, then moved by whole
+    periods into the slab. Returns points (n, 3) and outward unit normals (n, 3).
+    """
+    if not (R2 > R1 > 0 and k1 > 0 and int(starts) != 0 and int(periods) >= 1):
+        raise ValueError("helical surface needs R2 > R1 > 0, k1 > 0, starts ≠ 0, periods ≥ 1")
+    a0, a1 = span(arc)
+    starts, periods = int(starts), int(periods)
+    v = a0 + (a1 - a0) * rng.random(n)
+    g = np.linspace(0.0, TAU, 2049)
+    s = inverse_cdf(rng, n, g, _helical_density(R1, R2, k1, starts, g)) + TAU * rng.integers(0, periods, n)
+    # Slab condition: 0 ≤ k1 (u + starts v) + k2 < L  ⇔  u + starts v + k2/k1 ∈ [0, 2π periods).
+    lo = -starts * v - k2 / k1
+    u = lo + np.mod(s - lo, TAU * periods)  # whole periods: the density of u is unchanged
+    R, dR = helical_radius(R1, R2, u)
+    cv, sv = np.cos(v), np.sin(v)
+    pts = np.column_stack([R * cv, R * sv, k1 * (u + starts * v) + k2])
+    # −(S_u × S_v) points away from the axis.
+    nrm = -np.column_stack([k1 * (starts * dR * sv - R * cv), -k1 * (R * sv + starts * dR * cv), R * dR])
+    return pts, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+
+
+def _helical_surface_area(R1: float, R2: float, k1: float, starts: int, periods: int, k2: float = 0.0,
+                          arc: tuple[float, float] = (0.0, TAU)) -> float:
+    g = np.linspace(0.0, TAU, 4097)
+    d = _helical_density(R1, R2, k1, int(starts), g)
+    return float((arc[1] - arc[0]) * int(periods) * np.sum(0.5 * (d[1:] + d[:-1]) * np.diff(g)))
+
+
+def _helical_surface_local(R1: float, R2: float, k1: float, starts: int, k2: float = 0.0, **_: Any) -> dict[str, Any]:
+    return {"axis_point": list(ORIGIN), "axis": list(Z_AXIS), "ref_direction": [1.0, 0.0, 0.0], "R1": float(R1),
+            "R2": float(R2), "n": int(starts), "k1": float(k1), "k2": float(k2 % (TAU * k1))}
+
+
+def _helical_surface_random(rng: np.random.Generator) -> dict[str, Any]:
+    R2 = float(rng.uniform(0.7, 1.0))
+    starts = int(rng.integers(1, 4)) * (1 if rng.random() < 0.7 else -1)
+    # Profile period 0.6–0.9 R2: a few sampling neighbourhoods per period at a few thousand
+    # points, so that estimated normals still follow the flanks.
+    k1 = R2 * float(rng.uniform(0.6, 0.9)) / TAU
+    return {"R1": R2 * float(rng.uniform(0.6, 0.75)), "R2": R2, "k1": k1, "starts": starts,
+            "periods": int(rng.integers(3, 5)), "k2": float(rng.uniform(0.0, TAU * k1))}
+
+
 @register
 class HelicalSurface(Family):
     name = "helical_surface"
     param_names = ("axis_point", "axis", "ref_direction", "R1", "R2", "n", "k1", "k2")
     n_unknowns = 3
-    complexity = 9
-    simple = False
+    role = "complex"
+    precedence = 9
     #: Sought in the global round too, when the whole cloud's normal lines form
     #: one linear complex: otherwise planes and cylinders take the strip's bands
     #: there (5 noisy single instances: 0/5 recognised, 5/5 with it).
-    global_search = True
+    search = "whole"
+    order = 80
+    color = (140, 80, 30)  # brown
+    type_code = 10
+    sampler = Sampler(sample_helical_surface, _helical_surface_area, _helical_surface_local,
+                      _helical_surface_random,
+                      {"axis_point": "point", "axis": "direction", "ref_direction": "direction",
+                       "R1": "length", "R2": "length", "k1": "length", "k2": "length",
+                       "n": "invariant"})
 
     # --- standard form and voting -------------------------------------------
     def placements(self, P, N, ctx):

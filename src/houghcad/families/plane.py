@@ -2,11 +2,63 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..hough import Grid, direction_accumulator, refine_direction
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Placement, Primitive, register, unit
+from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler
+
+
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_plane_patch(
+    rng: np.random.Generator, n: int, size: tuple[float, float] = (1.0, 1.0), shape: str = "rect"
+) -> tuple[Array, Array]:
+    """Uniform points on a patch of the plane z = 0, centred at the origin.
+
+    Parameters
+    ----------
+    rng : numpy Generator
+    n : int
+        Number of points.
+    size : (w, h)
+        Side lengths along x and y (units). For ``shape="disc"`` the patch is the ellipse
+        inscribed in that rectangle (a disc of radius w/2 when w = h).
+    shape : "rect" or "disc"
+
+    Returns
+    -------
+    points : (n, 3) float64, normals : (n, 3) float64 (all +z)
+    """
+    w, h = float(size[0]), float(size[1])
+    if shape == "rect":
+        xy = (rng.random((n, 2)) - 0.5) * np.array([w, h])
+    elif shape == "disc":
+        rho = np.sqrt(rng.random(n))
+        phi = TAU * rng.random(n)
+        xy = np.stack([0.5 * w * rho * np.cos(phi), 0.5 * h * rho * np.sin(phi)], axis=1)
+    else:
+        raise ValueError(f"unknown plane patch shape {shape!r}")
+    pts = np.column_stack([xy, np.zeros(n)])
+    nrm = np.zeros((n, 3))
+    nrm[:, 2] = 1.0
+    return pts, nrm
+
+
+def _plane_area(size: tuple[float, float] = (1.0, 1.0), shape: str = "rect") -> float:
+    return float(size[0] * size[1] * (1.0 if shape == "rect" else np.pi / 4))
+
+
+def _plane_local(**_: Any) -> dict[str, Any]:
+    return {"normal": list(Z_AXIS), "offset": 0.0, "point": list(ORIGIN)}
+
+
+def _plane_random(rng: np.random.Generator) -> dict[str, Any]:
+    size = (float(rng.uniform(0.6, 1.4)), float(rng.uniform(0.6, 1.4)))
+    return {"size": size, "shape": "rect" if rng.random() < 0.7 else "disc"}
 
 
 @register
@@ -14,7 +66,14 @@ class Plane(Family):
     name = "plane"
     param_names = ("normal", "offset", "point")
     n_unknowns = 1
-    complexity = 0
+    role = "simple"
+    precedence = 0
+    search = "whole"
+    order = 10
+    color = (228, 26, 28)  # red
+    type_code = 1
+    sampler = Sampler(sample_plane_patch, _plane_area, _plane_local, _plane_random,
+                      {"normal": "direction", "offset": "offset", "point": "point"})
 
     def placements(self, P, N, ctx):
         # Standard-form estimation: the persistent peaks of the normals' votes

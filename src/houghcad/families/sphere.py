@@ -3,10 +3,13 @@ at the origin."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..hough import Grid, normal_line_peaks
 from .base import Frame, Family, Placement, Primitive, gauss_newton, lines_intersection, register, unit
+from ._sampling import ORIGIN, TAU, Array, Sampler, span
 
 
 def center_votes(P, N, ctx, max_centers):
@@ -21,12 +24,57 @@ def center_votes(P, N, ctx, max_centers):
                              max_centers)
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_sphere(
+    rng: np.random.Generator,
+    n: int,
+    radius: float,
+    polar_range: tuple[float, float] = (0.0, np.pi),
+    arc: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on the sphere of ``radius`` centred at the origin.
+
+    ``polar_range`` (rad, within [0, π]) is the range of the angle from +z, ``arc`` the azimuth
+    range. Area-correct: z is uniform (Archimedes). Returns points (n, 3), outward normals (n, 3).
+    """
+    p0, p1 = span(polar_range)
+    a0, a1 = span(arc)
+    u = np.cos(p1) + (np.cos(p0) - np.cos(p1)) * rng.random(n)  # cos(polar), uniform
+    rho = np.sqrt(np.clip(1.0 - u * u, 0.0, None))
+    th = a0 + (a1 - a0) * rng.random(n)
+    nrm = np.column_stack([rho * np.cos(th), rho * np.sin(th), u])
+    return radius * nrm, nrm
+
+
+def _sphere_area(
+    radius: float, polar_range: tuple[float, float] = (0.0, np.pi), arc: tuple[float, float] = (0.0, TAU)
+) -> float:
+    return float((arc[1] - arc[0]) * radius**2 * (np.cos(polar_range[0]) - np.cos(polar_range[1])))
+
+
+def _sphere_local(radius: float, **_: Any) -> dict[str, Any]:
+    return {"center": list(ORIGIN), "radius": float(radius)}
+
+
+def _sphere_random(rng: np.random.Generator) -> dict[str, Any]:
+    cap = (0.0, np.pi) if rng.random() < 0.5 else (0.0, float(rng.uniform(np.pi / 3, 0.9 * np.pi)))
+    return {"radius": float(rng.uniform(0.5, 1.2)), "polar_range": cap}
+
+
 @register
 class Sphere(Family):
     name = "sphere"
     param_names = ("center", "radius")
     n_unknowns = 1
-    complexity = 2
+    role = "simple"
+    precedence = 2
+    search = "whole"
+    order = 30
+    color = (200, 40, 200)  # magenta
+    type_code = 4
+    sampler = Sampler(sample_sphere, _sphere_area, _sphere_local, _sphere_random,
+                      {"center": "point", "radius": "length"})
 
     def placements(self, P, N, ctx):
         # Globally only the least-squares centre (cheap; right when one sphere

@@ -3,12 +3,15 @@ the axis is along z and the centre at the origin."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
+from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 
 def torus_frame(P, N):
@@ -30,13 +33,77 @@ def torus_frame(P, N):
     return q + h0 * a, a, float(R0)
 
 
+# --- synthetic sampler (houghcad.synth) ----------------------------------------
+
+def sample_torus(
+    rng: np.random.Generator,
+    n: int,
+    major: float,
+    minor: float,
+    u_range: tuple[float, float] = (0.0, TAU),
+    v_range: tuple[float, float] = (0.0, TAU),
+) -> tuple[Array, Array]:
+    """Uniform points on a ring torus around z, centred at the origin (major > minor > 0).
+
+    Point ``((R + r cos v) cos u, (R + r cos v) sin u, r sin v)``: u (rad) goes around the axis,
+    v (rad) around the tube (v = 0 outermost, v = π/2 top). The area element
+    ``r (R + r cos v) du dv`` is honoured by drawing v by inverse CDF (interpolated start,
+    then Newton steps on the closed-form CDF). Returns points (n, 3), outward normals (n, 3).
+    """
+    if not major > minor > 0:
+        raise ValueError("torus needs major > minor > 0")
+    u0, u1 = span(u_range)
+    v0, v1 = span(v_range)
+    u = u0 + (u1 - u0) * rng.random(n)
+
+    def cdf(v: Array) -> Array:
+        return major * (v - v0) + minor * (np.sin(v) - np.sin(v0))
+
+    target = rng.random(n) * cdf(np.array(v1))
+    grid = np.linspace(v0, v1, 1025)
+    v = np.interp(target, cdf(grid), grid)
+    for _ in range(4):
+        v = np.clip(v - (cdf(v) - target) / (major + minor * np.cos(v)), v0, v1)
+    cu, su, cv, sv = np.cos(u), np.sin(u), np.cos(v), np.sin(v)
+    nrm = np.column_stack([cv * cu, cv * su, sv])
+    pts = np.column_stack([(major + minor * cv) * cu, (major + minor * cv) * su, minor * sv])
+    return pts, nrm
+
+
+def _torus_area(
+    major: float, minor: float, u_range: tuple[float, float] = (0.0, TAU), v_range: tuple[float, float] = (0.0, TAU)
+) -> float:
+    dv = v_range[1] - v_range[0]
+    return float(minor * (u_range[1] - u_range[0]) * (major * dv + minor * (np.sin(v_range[1]) - np.sin(v_range[0]))))
+
+
+def _torus_local(major: float, minor: float, **_: Any) -> dict[str, Any]:
+    return {"center": list(ORIGIN), "axis": list(Z_AXIS), "major_radius": float(major), "minor_radius": float(minor)}
+
+
+def _torus_random(rng: np.random.Generator) -> dict[str, Any]:
+    major = float(rng.uniform(0.8, 1.2))
+    return {
+        "major": major,
+        "minor": major * float(rng.uniform(0.2, 0.5)),
+        "u_range": partial(rng, 0.5, np.pi / 2, 1.7 * np.pi),
+        "v_range": partial(rng, 0.6, np.pi, 1.8 * np.pi),
+    }
+
+
 @register
 class Torus(Family):
     name = "torus"
     param_names = ("center", "axis", "major_radius", "minor_radius")
     n_unknowns = 2
-    complexity = 4
-    global_search = False
+    role = "simple"
+    precedence = 4
+    search = "cluster"
+    order = 50
+    color = (0, 0, 0)  # black
+    type_code = 5
+    sampler = Sampler(sample_torus, _torus_area, _torus_local, _torus_random,
+                      {"center": "point", "axis": "direction", "major_radius": "length", "minor_radius": "length"})
 
     def placements(self, P, N, ctx):
         c, a, _ = torus_frame(P, N)
