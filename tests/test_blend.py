@@ -60,17 +60,18 @@ def _corner_points(r: float, sigma: float, seed: int, n_side: int = 1500, length
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_fit_fillet_finds_a_fillet_of_six_sigma(seed):
     A, B = _corner_points(6.0, 1.0, seed)
-    r, lr, C, t, band, L, taken = fit_fillet(A, B, L0, 1.0, r_cap=30.0)
-    assert r == pytest.approx(6.0, rel=0.15)
-    assert lr > LR_MIN
-    assert np.allclose(C, 0, atol=0.3)
+    fit = fit_fillet(A, B, L0, 1.0, r_cap=30.0)
+    assert fit.radius == pytest.approx(6.0, rel=0.15)
+    assert fit.lr > LR_MIN
+    assert np.allclose(fit.corner, 0, atol=0.3)
+    assert len(fit.taken) == 0 and fit.band.shape == (len(A) + len(B),)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_fit_fillet_leaves_a_sharp_corner_sharp(seed):
     A, B = _corner_points(0.0, 1.0, seed)
-    r, lr, *_ = fit_fillet(A, B, L0, 1.0, r_cap=30.0)
-    assert lr < LR_MIN and r < 1.5
+    fit = fit_fillet(A, B, L0, 1.0, r_cap=30.0)
+    assert fit.lr < LR_MIN and fit.radius < 1.5
 
 
 def test_section_of_two_planes_and_of_a_plane_with_a_coaxial_cylinder():

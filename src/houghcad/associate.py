@@ -51,6 +51,8 @@ EXTENT_PERCENTILES = (2.5, 97.5)
 EXTENT_POINTS = 2000
 #: Stands for an infinite dissimilarity in the linkage.
 _FAR = 1e9
+#: Integer descriptors are equal or not at all.
+_INTEGER_TOL = 0.5
 #: Guards a division by a zero span.
 _TINY = 1e-12
 
@@ -320,7 +322,7 @@ class Associator:
         if key in fam.length_descriptors:
             return L + self.tol.relative_tol * max(abs(a), abs(b))
         if key in fam.integer_descriptors:
-            return 0.5
+            return _INTEGER_TOL
         return A
 
     def _shape_distance(self, fam: Family, dp: dict, dq: dict, L: float, A: float) -> float:
@@ -489,7 +491,7 @@ class Associator:
         if np.linalg.norm(c2 - c1) < self.tol.mirror_lengths * self._L:
             return None
         m = unit(c2 - c1)
-        mid = 0.5 * (c1 + c2)
+        mid = (c1 + c2) / 2
 
         def reflect_dir(d):
             return d - 2.0 * (d @ m) * m

@@ -4,9 +4,11 @@ on noisy clouds poorly fitted segments are voted again alone."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .adjacency import smooth_adjacency
 from .context import Context
@@ -39,18 +41,15 @@ def consolidate(seg: Segmentation, families: list[Family], ctx: Context) -> None
     cplx = [f for f in families if f.role == "complex"]
     # Only noise lets simpler families slice a cone or torus in the
     # whole-cloud round (on clean samples evaluate()'s gate rejects slices).
-    per_cluster = [f for f in families if f.role == "simple" and f.search == "cluster"] if ctx.noisy else []
-    if ctx.noisy:
+    revote = ctx.policy.revote_cluster_families
+    per_cluster = [f for f in families if f.role == "simple" and f.search == "cluster"] if revote else []
+    if revote:
         revisit_poor_fits(seg, families, ctx)
     _revote_groups(seg, cplx, per_cluster, ctx)
     merge_complex(seg, ctx)
 
 
-#: Share of a poorly fitted segment that a candidate must explain to replace it.
-DOMINANT = 0.6
-
-
-def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, excess: float = 1.3) -> bool:
+def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context) -> bool:
     """On a noisy cloud, vote every family again on each segment whose
     primitive fits it clearly worse than the noise, in place.
 
@@ -64,7 +63,7 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, e
     every candidate the same), less the noise's own mean distance (0.8 σ).
     Segments within ``excess`` times the noise's cost are left alone. Among
     the candidates that explain most of the segment (a share of at least
-    ``DOMINANT`` of its points, 80 % of that share within tau, see
+    ``dominant`` of its points, 80 % of that share within tau, see
     :func:`_covered`), a more complex family displaces a simpler one only by
     halving that excess, as in selection; the choice replaces the segment
     when, on its share, it halves the excess of the segment's own primitive
@@ -73,9 +72,10 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, e
     primitive explains with it, is freed for its neighbours (:func:`absorb`).
     Returns whether a segment was replaced.
     """
+    t = ctx.tol.consolidation
     P = ctx.pre.points
-    ref = 0.8 * ctx.pre.noise
-    least = 0.05 * ref  # excesses below this are the noise's own
+    ref = ctx.tol.recognition.noise_mean_sigmas * ctx.pre.noise
+    least = t.least_excess * ref  # excesses below this are the noise's own
     lctx = replace(ctx, local=True)
 
     def cost(c: Candidate, idx: np.ndarray) -> float:
@@ -85,16 +85,16 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, e
 
     for k in sorted(range(len(seg)), key=lambda i: -len(seg.indices(i))):
         s = seg[k]
-        if len(s.indices) < 3 * ctx.min_points:
+        if len(s.indices) < t.revisit_min_size * ctx.min_points:
             continue
         own = cost(s, s.indices)
-        if own <= (excess - 1.0) * ref:
+        if own <= (t.excess - 1.0) * ref:
             continue
         avail = np.zeros(len(P), bool)
         avail[s.indices] = True
         cover = []
         for c in candidates(s.indices, families, lctx, avail):
-            if len(c.indices) < DOMINANT * len(s.indices):
+            if len(c.indices) < t.dominant * len(s.indices):
                 continue
             # The candidate's share of the segment, compared there.
             sub = replace(s, indices=c.indices)
@@ -102,8 +102,9 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, e
             if got:
                 cover.append((max(cost(c, s.indices), least), c, got[0][1]))
         best = None
-        for e, c, q in sorted(cover, key=lambda t: (t[1].family.precedence, t[0])):
-            if best is None or (e < 0.5 * best[0] if c.family.precedence > best[1].family.precedence else e < best[0]):
+        for e, c, q in sorted(cover, key=lambda x: (x[1].family.precedence, x[0])):
+            if best is None or (e < t.complex_halving * best[0] if c.family.precedence > best[1].family.precedence
+                                else e < best[0]):
                 best = (e, c, q)
         if best is None:
             continue
@@ -111,13 +112,23 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context, e
         # Against the segment's own primitive on the candidate's share only:
         # the rest may be another surface, which no one primitive explains.
         mine, theirs = max(cost(c, c.indices), least), max(cost(s, c.indices), least)
-        if mine >= (0.5 if c.family.precedence > s.family.precedence else 1.0) * theirs:
+        if mine >= (t.complex_halving if c.family.precedence > s.family.precedence else 1.0) * theirs:
             continue
         new = _union(c, [q], P)
         seg.set_points(k, new.indices)
         seg.set_record(k, new.record)
         replaced = True
     return replaced
+
+
+@dataclass(frozen=True)
+class _Vote:
+    """One grouping of the segments and the families voted on its groups."""
+
+    edges: np.ndarray  # (k, 2) segment pairs joined
+    families: list[Family]
+    ctx: Context
+    peel: bool  # set aside the faces that dominate a group (see _vote_group)
 
 
 def _revote_groups(seg: Segmentation, cplx: list[Family], per_cluster: list[Family], ctx: Context) -> None:
@@ -131,95 +142,106 @@ def _revote_groups(seg: Segmentation, cplx: list[Family], per_cluster: list[Fami
     """
     if not cplx and not per_cluster:
         return
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     n = len(seg)
-    P = ctx.pre.points
     removed = np.zeros(n, bool)
     added: list[Candidate] = []
+    # A wider grouping repeats most groups: each (families, members) is voted
+    # once (a vote that took nothing would take nothing again).
+    voted: set[tuple[int, ...]] = set()
+    for vote in _groupings(seg, cplx, per_cluster, ctx):
+        g = coo_matrix((np.ones(len(vote.edges)), (vote.edges[:, 0], vote.edges[:, 1])), shape=(n, n))
+        ncomp, lab = connected_components(g, directed=False)
+        for comp in range(ncomp):
+            members = np.flatnonzero((lab == comp) & ~removed)
+            key = (id(vote.families), vote.peel, *members.tolist())
+            if key in voted:
+                continue
+            voted.add(key)
+            if vote.peel:
+                # Segments of these families are whole surfaces already.
+                members = np.array([m for m in members if seg[m].family not in vote.families], dtype=np.int64)
+            added += _vote_group(seg, members, vote, removed, ctx)
+    if added:
+        seg.remove(np.flatnonzero(removed))
+        accept(added, seg, ctx)
+
+
+def _groupings(seg: Segmentation, cplx: list[Family], per_cluster: list[Family], ctx: Context) -> list[_Vote]:
+    """The groupings voted, in order (see :func:`_revote_groups`)."""
     joined = smooth_adjacency(seg, ctx)
     votes = []
     if cplx:
         # Voted as a whole cloud (ctx.local False): the families' gates skip a
         # group that is not one complex surface, which most groups of simple
         # faces are not (a plane, a fillet and a plane).
-        votes.append((joined, cplx, ctx, False))
-        if ctx.noisy:
+        votes.append(_Vote(joined, cplx, ctx, False))
+        if ctx.policy.revote_creases:
             # Planes and spheres that slice a noisy curved surface meet at
             # creases wider than a face's own normals wander: joined up to
             # the normals' tolerance, they make the group again.
-            votes.append((smooth_adjacency(seg, ctx, crease=ctx.angle), cplx, ctx, False))
+            votes.append(_Vote(smooth_adjacency(seg, ctx, crease=ctx.angle), cplx, ctx, False))
     if per_cluster:
         # The bands of a noisy cone fit to the noise each, and their fitted
         # normals often disagree at their contacts: after the tangent-joined
         # groups, any contact joins them, and so the faces of a whole part;
         # the faces that dominate what remains are set aside in turn.
         lctx = replace(ctx, local=True)
-        votes.append((joined, per_cluster, lctx, True))
-        votes.append((smooth_adjacency(seg, ctx, smooth=False), per_cluster, lctx, True))
-    # A wider grouping repeats most groups: each (families, members) is voted
-    # once (a vote that took nothing would take nothing again).
-    voted: set[tuple[int, ...]] = set()
-    for edges, fams, vctx, peel in votes:
-        g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-        ncomp, lab = connected_components(g, directed=False)
-        for comp in range(ncomp):
-            members = np.flatnonzero((lab == comp) & ~removed)
-            key = (id(fams), peel, *members.tolist())
-            if key in voted:
+        votes.append(_Vote(joined, per_cluster, lctx, True))
+        votes.append(_Vote(smooth_adjacency(seg, ctx, smooth=False), per_cluster, lctx, True))
+    return votes
+
+
+def _vote_group(seg: Segmentation, members: np.ndarray, vote: _Vote, removed: np.ndarray,
+                ctx: Context) -> list[Candidate]:
+    """The candidates that replace two or more of the group's ``members``
+    (segment ids); their ids are marked in ``removed`` (bool (m,)).
+
+    A carved surface is cut into comparable pieces; a face that dominates its
+    group (the plane a torus meets) is not one of them. Where the vote takes
+    nothing, the largest face is set aside too (``peel_retries`` at most):
+    the placement from the group's normals suits one surface of it, which
+    need not be the carved one.
+    """
+    t = ctx.tol.consolidation
+    P = ctx.pre.points
+    sizes = np.array([len(seg[m].indices) for m in members])
+    added: list[Candidate] = []
+    retries = t.peel_retries
+    while True:
+        while vote.peel and len(members) >= 2 and sizes.max() > t.peel_share * sizes.sum():
+            keep = np.arange(len(members)) != np.argmax(sizes)
+            members, sizes = members[keep], sizes[keep]
+        if len(members) < 2 or sizes.max() > t.peel_share * sizes.sum():
+            break
+        region = np.concatenate([seg[m].indices for m in members])
+        avail = np.zeros(len(P), bool)
+        avail[region] = True
+        took = False
+        for c in recognize(np.sort(region), vote.families, vote.ctx, avail):
+            got = _covered(c, [seg[m] for m in members], ctx)
+            got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
+            if vote.peel:
+                # A carved surface is contiguous: the pieces must touch one
+                # another, not only the peeled faces (two opposite holes of
+                # a thin plate lie on one torus through both).
+                got = _touching(got, vote.edges)
+            if len(got) < 2 or _simple_suffices([seg[m] for m, _, _ in got], ctx):
                 continue
-            voted.add(key)
-            if peel:
-                # Segments of these families are whole surfaces already.
-                members = np.array([m for m in members if seg[m].family not in fams], dtype=np.int64)
-            sizes = np.array([len(seg[m].indices) for m in members])
-            # A carved surface is cut into comparable pieces; a face that
-            # dominates its group (the plane a torus meets) is not one of them.
-            # Where the vote takes nothing, the largest face is set aside too
-            # (twice at most): the placement from the group's normals suits
-            # one surface of it, which need not be the carved one.
-            retries = 2
-            while True:
-                while peel and len(members) >= 2 and sizes.max() > 2 / 3 * sizes.sum():
-                    keep = np.arange(len(members)) != np.argmax(sizes)
-                    members, sizes = members[keep], sizes[keep]
-                if len(members) < 2 or sizes.max() > 2 / 3 * sizes.sum():
-                    break
-                region = np.concatenate([seg[m].indices for m in members])
-                avail = np.zeros(len(P), bool)
-                avail[region] = True
-                took = False
-                for c in recognize(np.sort(region), fams, vctx, avail):
-                    got = _covered(c, [seg[m] for m in members], ctx)
-                    got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
-                    if peel:
-                        # A carved surface is contiguous: the pieces must touch one
-                        # another, not only the peeled faces (two opposite holes of
-                        # a thin plate lie on one torus through both).
-                        got = _touching(got, edges)
-                    if len(got) < 2 or _simple_suffices([seg[m] for m, _, _ in got], ctx):
-                        continue
-                    removed[[m for m, _, _ in got]] = True
-                    added.append(_union(c, [q for _, q, _ in got], P))
-                    took = True
-                if took or not peel or retries == 0:
-                    break
-                retries -= 1
-                keep = np.arange(len(members)) != np.argmax(sizes)
-                members, sizes = members[keep], sizes[keep]
-    if added:
-        seg.remove(np.flatnonzero(removed))
-        accept(added, seg, ctx)
+            removed[[m for m, _, _ in got]] = True
+            added.append(_union(c, [q for _, q, _ in got], P))
+            took = True
+        if took or not vote.peel or retries == 0:
+            break
+        retries -= 1
+        keep = np.arange(len(members)) != np.argmax(sizes)
+        members, sizes = members[keep], sizes[keep]
+    return added
 
 
 def _touching(got: list, edges: np.ndarray) -> list:
     """The largest set of ``got``'s pieces (position first) connected by ``edges`` (k, 2)."""
     if len(got) < 2:
         return got
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     pos = {m: i for i, (m, _, _) in enumerate(got)}
     e = [(pos[a], pos[b]) for a, b in edges.tolist() if a in pos and b in pos]
     if not e:
@@ -230,7 +252,7 @@ def _touching(got: list, edges: np.ndarray) -> list:
     return [g for g, l in zip(got, lab) if l == big]
 
 
-def merge_complex(seg: Segmentation, ctx: Context, rounds: int = 10) -> None:
+def merge_complex(seg: Segmentation, ctx: Context) -> None:
     """Each complex segment, or on a noisy cloud any segment, takes the
     adjacent segments that lie on its surface (a complex one only smaller
     ones), in place.
@@ -250,7 +272,7 @@ def merge_complex(seg: Segmentation, ctx: Context, rounds: int = 10) -> None:
     """
     P = ctx.pre.points
     tried: set[tuple[int, ...]] = set()  # re-votes done: each configuration once
-    for _ in range(rounds):
+    for _ in range(ctx.tol.consolidation.merge_rounds):
         grown = False
         edges = smooth_adjacency(seg, ctx, smooth=False)
         order = sorted(range(len(seg)), key=lambda i: -len(seg.indices(i)))
@@ -258,7 +280,7 @@ def merge_complex(seg: Segmentation, ctx: Context, rounds: int = 10) -> None:
         segs: list[SegmentView | Candidate | None] = list(seg)
         for i in order:
             c = segs[i]
-            if c is None or (c.family.role == "simple" and not ctx.noisy):
+            if c is None or (c.family.role == "simple" and not ctx.policy.merge_simple):
                 continue
             nbrs = np.unique(np.r_[edges[edges[:, 0] == i, 1], edges[edges[:, 1] == i, 0]])
             # A cone or torus piece may be the smallest of its surface's pieces
@@ -306,7 +328,8 @@ def _simple_suffices(pieces: list[Candidate], ctx: Context) -> bool:
     all of them, explains every piece: then they are pieces of one simple
     face (a hole split in two), for association to merge."""
     idx = np.concatenate([s.indices for s in pieces])
-    sel = idx[np.sort(np.random.default_rng(ctx.seed).choice(len(idx), min(len(idx), 600), replace=False))]
+    m = min(len(idx), ctx.tol.consolidation.suffices_points)
+    sel = idx[np.sort(np.random.default_rng(ctx.seed).choice(len(idx), m, replace=False))]
     for s in sorted(pieces, key=lambda s: -len(s.indices)):
         if s.family.role != "simple":
             continue
@@ -325,26 +348,27 @@ def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool 
     its points so and that ``c`` fits no worse than its own primitive does or,
     with ``own_fit``, no worse than half again ``c``'s fit to its own points.
     ``strict`` (noisy clouds): also over all the piece's points (see below)."""
+    t = ctx.tol.consolidation
     P, N = ctx.pre.points, ctx.pre.normals
     own = c.family.distance(c.prim, P[c.indices]).mean() if own_fit else 0.0
     out = []
     for j, s in enumerate(pieces):
         Q = s.indices
         ok, d = inliers(c.family, c.prim, P[Q], N[Q], ctx.tau, ctx.cos_angle)
-        if ok.mean() < 0.8:
+        if ok.mean() < t.cover_share:
             continue
         mine = s.family.distance(s.prim, P[Q]).mean()
-        bound = max(1.1 * mine + 0.02 * ctx.tau, 1.5 * own)
+        bound = max(t.cover_ratio * mine + t.cover_taus * ctx.tau, t.own_fit_ratio * own)
         if d[ok].mean() > bound:
             continue
-        if strict and ctx.noisy and not own_fit:
+        if strict and ctx.policy.strict_cover and not own_fit:
             # The mean over the inliers within tau (3 σ) is truncated: a
             # surface a noise σ off the piece still passes the test above.
             # Over all the piece's points, c must fit as well as the piece's
             # own primitive, or the noise where that fits below it (a slice
             # chosen for being close), within two standard errors.
-            ref = max(mine, 0.8 * ctx.pre.noise)
-            if d.mean() > ref * (1.0 + 1.5 / np.sqrt(len(Q))):
+            ref = max(mine, ctx.tol.recognition.noise_mean_sigmas * ctx.pre.noise)
+            if d.mean() > ref * (1.0 + t.strict_se / np.sqrt(len(Q))):
                 continue
         out.append((j, Q[ok], d[ok]))
     return out
@@ -371,12 +395,13 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
     ``fixed`` primitive (a fillet found by :mod:`houghcad.blend`) stays.
     """
     plane = next((f for f in families if f.name == "plane"), None)
-    if plane is None or not ctx.noisy:
+    if plane is None or not ctx.policy.nearest_edges:
         return 0
     P, N = ctx.pre.points, ctx.pre.normals
     changed = 0
     for k, s in enumerate(seg):
-        if s.family.name not in ("cylinder", "sphere", "torus") or s.fixed or len(s.indices) < 10:
+        if s.family.name not in ("cylinder", "sphere", "torus") or s.fixed or \
+                len(s.indices) < ctx.tol.consolidation.plane_min_points:
             continue
         Q = P[s.indices]
         c = Q.mean(axis=0)
@@ -386,7 +411,7 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
             continue
         d_own = np.minimum(s.family.distance(s.prim, Q), ctx.tau)
         d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
-        if d_pl.mean() > d_own.mean() + 2.0 * d_own.std() / np.sqrt(len(Q)):
+        if d_pl.mean() > d_own.mean() + ctx.tol.consolidation.plane_se * d_own.std() / np.sqrt(len(Q)):
             continue
         seg.set_record(k, SegmentRecord(plane, prim))
         changed += 1

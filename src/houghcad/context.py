@@ -8,10 +8,13 @@ import numpy as np
 
 from .noise import CLEAN, NoisePolicy
 from .preprocess import Preprocessed
-from .tolerances import Tolerances
+from .tolerances import ScaleTolerances, Tolerances
 
 #: Guards divisions by a zero spacing (standard units).
 _TINY = 1e-12
+#: Peak persistence threshold, a fraction of the accumulator's maximum.
+DEFAULT_PERSISTENCE = 0.1
+_SCALE = ScaleTolerances()
 
 
 @dataclass
@@ -50,11 +53,11 @@ class Context:
     link: float
     cell: float
     min_points: int
-    persistence: float = 0.1
-    max_peaks: int = 24
-    max_directions: int = 12
-    max_radius: float = 2.0
-    min_votes: float = 10.0
+    persistence: float = DEFAULT_PERSISTENCE
+    max_peaks: int = _SCALE.max_peaks
+    max_directions: int = _SCALE.max_directions
+    max_radius: float = _SCALE.max_radius
+    min_votes: float = _SCALE.min_points_floor
     seed: int = 0
     local: bool = False
     neighbors: np.ndarray | None = None
@@ -76,7 +79,8 @@ class Context:
 
 
 def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: NoisePolicy,
-                   epsilon: float | None = None, min_points: int | None = None, persistence: float = 0.1,
+                   epsilon: float | None = None, min_points: int | None = None,
+                   persistence: float = DEFAULT_PERSISTENCE,
                    seed: int = 0) -> Context:
     """The run's scales from the point spacing and the estimated noise.
 

@@ -17,6 +17,8 @@ from .result import GROUP_KINDS, Group, Part, Segment
 from .state import Segmentation, mean_fitting_error
 
 #: Points per final refit: beyond this the parameters no longer move.
+#: Final refits may reach any radius below this (standard units).
+_ANY_RADIUS = 1e9
 MAX_REFIT_POINTS = 4000
 
 
@@ -30,8 +32,7 @@ def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed,
     T = pre.transform
     order = sorted(range(len(seg)), key=lambda k: (-len(seg.indices(k)), int(seg.indices(k)[0])))
     new_id = {k: i for i, k in enumerate(order)}
-    # Final refits may reach any radius below 1e9 (standard units).
-    check = Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0, max_radius=1e9)
+    check = Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0, max_radius=_ANY_RADIUS)
     rng = np.random.default_rng(seed)
 
     def fitted(fam: Family, prim0: Primitive, idx: np.ndarray, fixed: bool = False) -> tuple[dict, float]:

@@ -23,7 +23,7 @@ from .associate import Associator
 from .blend import find_fillets
 from .boundaries import dissolve_redundant, settle_edges, settle_noisy_edges
 from .consolidation import consolidate, prefer_planes, revisit_poor_fits
-from .context import Context, derive_context, on_surface
+from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
 from .errors import InputError
 from .families import Family
 from .growth import absorb, accept
@@ -40,6 +40,17 @@ PAPER_5_2 = "paper §5.2"
 PAPER_5_3 = "paper §5.3"
 PAPER_5_4 = "paper §5.4"
 EXTENSION = "extension"
+
+#: ε, as a fraction of the diagonal, must stay below this.
+MAX_EPSILON = 0.5
+# Progress fractions reported: the passes in order, the splitting phase
+# within its own span (it takes most of the time), then the output.
+_PASSES_START = 0.1
+_PASSES_SPAN = 0.85
+_PASSES_END = 0.95
+_SPLIT_START = 0.3
+_SPLIT_SPAN = 0.6
+_OUTPUT_AT = 0.96
 
 
 @dataclass(frozen=True)
@@ -130,7 +141,7 @@ def splitting(seg: Segmentation, run: Run) -> Segmentation:
 
     def step(n: int) -> None:
         done[0] += n
-        run.progress("splitting", 0.3 + 0.6 * min(done[0] / n0, 1.0))
+        run.progress("splitting", _SPLIT_START + _SPLIT_SPAN * min(done[0] / n0, 1.0))
 
     splitting_phase(seg, run.voted, run.ctx, progress=step)
     return seg
@@ -241,7 +252,7 @@ class _Runner:
         if not p.when(self.run.ctx):
             return seg
         name = prefix + p.name
-        self.run.progress(name, min(0.1 + 0.85 * self.step / len(PIPELINE), 0.95))
+        self.run.progress(name, min(_PASSES_START + _PASSES_SPAN * self.step / len(PIPELINE), _PASSES_END))
         before = seg.version
         t = time.perf_counter()
         seg = p.run(seg, self.run)
@@ -324,7 +335,7 @@ class Segmenter:
     """
 
     def __init__(self, families="simple", epsilon: float | None = None, normals_method: str = "auto",
-                 persistence: float = 0.1, min_points: int | None = None, seed: int = 0,
+                 persistence: float = DEFAULT_PERSISTENCE, min_points: int | None = None, seed: int = 0,
                  progress: Callable[[str, float], None] | None = None, merge: bool = True,
                  association: dict[str, Any] | None = None, trace: str | Path | TraceFn | None = None,
                  check: bool | None = None, noise: str = "auto",
@@ -378,7 +389,7 @@ class Segmenter:
             normals = np.asarray(normals, dtype=np.float64)
             if normals.shape != points.shape or not np.isfinite(normals).all():
                 normals = None
-        if self.epsilon is not None and not (0 < float(self.epsilon) < 0.5):
+        if self.epsilon is not None and not (0 < float(self.epsilon) < MAX_EPSILON):
             raise InputError(f"epsilon must be a fraction of the diagonal in (0, 0.5), got {self.epsilon}")
         if not (0 < float(self.persistence) < 1):
             raise InputError(f"persistence must be in (0, 1), got {self.persistence}")
@@ -434,7 +445,7 @@ class Segmenter:
                 source: str | None) -> Result:
         self.segmentation_ = seg
         t = time.perf_counter()
-        run.progress("output", 0.96)
+        run.progress("output", _OUTPUT_AT)
         out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed)
         timing = {**timing, "output": time.perf_counter() - t}
         timing["total"] = sum(v for k, v in timing.items() if k != "total")

@@ -20,13 +20,7 @@ from .context import Context
 from .families import Family, Primitive
 from .hough import accumulate, persistent_peaks, smooth
 from .state import Candidate, SegmentRecord, Segmentation, mean_fitting_error
-
-
-#: Peaks evaluated per placement for a complex (non-simple) family.
-COMPLEX_MAX_PEAKS = 6
-
-#: Peaks a stacked family adds from the votes off its top peak's surface (see :func:`_beside_top`).
-BESIDE_TOP_PEAKS = 2
+from .tolerances import RecognitionTolerances
 
 
 def dense_subsets(P: np.ndarray, link: float, min_points: int, min_samples: int) -> list[np.ndarray]:
@@ -71,72 +65,95 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
     """
     P, N = ctx.pre.points[idx], ctx.pre.normals[idx]
     rng = np.random.default_rng(ctx.seed)
+    t = ctx.tol.recognition
     # Coarse (cell size) → intermediate → tau: each refit sees cleaner inliers.
-    for tol in (coarse, max(ctx.tau, min(coarse, 4 * ctx.tau))):
+    for tol in (coarse, max(ctx.tau, min(coarse, t.coarse_taus * ctx.tau))):
         ok, d = inliers(fam, prim, P, N, tol, ctx.cos_angle)
         if ok.sum() < ctx.min_points:
             return []
         sel = np.flatnonzero(ok)
-        sel = sel[_subsample(len(sel), 600, rng)]
+        sel = sel[_subsample(len(sel), t.refit_points, rng)]
         new = fam.fit(prim, P[sel], N[sel])
         if new is None or not fam.valid(new, ctx):
             return []
         prim = new
-    ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
-    # Refits on the inliers a face's own points dominate. Clean samples lie
-    # exactly on their face, and a neighbour's tangent band among the inliers
-    # pulls the least squares off it: refit on the closer half until the
-    # inliers fit to a small fraction of tau, or to the noise (past it,
-    # trimming fits the noise, not the face). Noise scatters a face's points
-    # symmetrically about it, 95 % of them within 2 σ, while a neighbouring
-    # face's points within tau (3 σ) sit further out on one side: refit twice
-    # on the inliers within 2 σ, which trims both sides of the face alike.
-    for _ in range(2 if ctx.noisy else 4):
-        sel = np.flatnonzero(ok)
-        if ctx.noisy:
-            sel = sel[d[sel] <= 2.0 * ctx.pre.noise]
-            if len(sel) < 2 * ctx.min_points:
-                break
-        else:
-            if len(sel) < 2 * ctx.min_points or d[sel].mean() <= max(0.05 * ctx.tau, ctx.pre.noise):
-                break
-            sel = sel[d[sel] <= np.median(d[sel])]
-        sel = sel[_subsample(len(sel), 600, rng)]
-        new = fam.fit(prim, P[sel], N[sel])
-        if new is None or not fam.valid(new, ctx):
-            break
-        prim = new
-        ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
+    prim, ok, d = _trimmed_refits(fam, prim, P, N, ctx, rng)
     sel = np.flatnonzero(ok)
     out = []
-    for comp in dense_subsets(P[sel], ctx.link, ctx.min_points, ctx.tol.recognition.dense_min_samples):
+    for comp in dense_subsets(P[sel], ctx.link, ctx.min_points, t.dense_min_samples):
         loc = sel[comp]
         X = P[loc]
-        # A one-row strip is not a surface patch...
-        ev = np.linalg.eigvalsh(np.cov(X.T))
-        if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
-            if not ctx.local:
-                continue
-            # ...unless it is the interior row of a narrow face whose boundary
-            # rows the neighbours took: those rows lie on the surface too.
-            dd, nb = ctx.pre.tree.query(X, k=8, distance_upper_bound=ctx.link)
-            nb = np.unique(nb[np.isfinite(dd)])
-            W = ctx.pre.points[nb]
-            W = W[fam.distance(prim, W) < ctx.tau]
-            if len(W) < 3:
-                continue
-            ev = np.linalg.eigvalsh(np.cov(W.T))
-            if np.sqrt(max(ev[1], 0)) < 0.4 * ctx.pre.spacing:
-                continue
+        if not _patch(fam, prim, X, ctx):
+            continue
         if not ctx.local and not fam.well_determined(prim, X, ctx):
             continue
         # On the whole cloud, a candidate whose inliers fit only to a fraction
         # of tau, not to the noise, is a tangent slice of a surface that
         # another family or the per-cluster rounds explain exactly.
-        if not ctx.local and d[loc].mean() > max(2.0 * ctx.pre.noise, 0.1 * ctx.tau):
+        if not ctx.local and d[loc].mean() > max(t.slice_sigmas * ctx.pre.noise, t.slice_taus * ctx.tau):
             continue
         out.append(Candidate(fam, prim, idx[loc], mean_fitting_error(d[loc], X), d[loc]))
     return out
+
+
+def _trimmed_refits(fam: Family, prim: Primitive, P: np.ndarray, N: np.ndarray, ctx: Context,
+                    rng: np.random.Generator) -> tuple[Primitive, np.ndarray, np.ndarray]:
+    """Refits on the inliers a face's own points dominate; the primitive, its
+    inlier mask (m,) and distances (m,) over P (m, 3).
+
+    Clean samples lie exactly on their face, and a neighbour's tangent band
+    among the inliers pulls the least squares off it: refit on the closer
+    half until the inliers fit to a small fraction of tau, or to the noise
+    (past it, trimming fits the noise, not the face). Noise scatters a face's
+    points symmetrically about it, 95 % of them within 2 σ, while a
+    neighbouring face's points within tau (3 σ) sit further out on one side:
+    refit on the inliers within 2 σ, which trims both sides of the face alike.
+    """
+    t = ctx.tol.recognition
+    noisy = ctx.policy.trim_to_noise
+    ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
+    for _ in range(t.noisy_trim_rounds if noisy else t.clean_trim_rounds):
+        sel = np.flatnonzero(ok)
+        if noisy:
+            sel = sel[d[sel] <= t.trim_sigmas * ctx.pre.noise]
+            if len(sel) < t.trim_min_points * ctx.min_points:
+                break
+        else:
+            if len(sel) < t.trim_min_points * ctx.min_points or \
+                    d[sel].mean() <= max(t.trim_stop_taus * ctx.tau, ctx.pre.noise):
+                break
+            sel = sel[d[sel] <= np.median(d[sel])]
+        sel = sel[_subsample(len(sel), t.refit_points, rng)]
+        new = fam.fit(prim, P[sel], N[sel])
+        if new is None or not fam.valid(new, ctx):
+            break
+        prim = new
+        ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
+    return prim, ok, d
+
+
+def _patch(fam: Family, prim: Primitive, X: np.ndarray, ctx: Context) -> bool:
+    """Whether the dense subset X (m, 3) is a surface patch, not a one-row strip.
+
+    A strip is accepted on a cluster when it is the interior row of a narrow
+    face whose boundary rows the neighbours took: those rows lie on the
+    surface too, and with them the patch is wide enough.
+    """
+    t = ctx.tol.recognition
+    width = t.strip_width_spacings * ctx.pre.spacing
+    ev = np.linalg.eigvalsh(np.cov(X.T))
+    if np.sqrt(max(ev[1], 0)) >= width:
+        return True
+    if not ctx.local:
+        return False
+    dd, nb = ctx.pre.tree.query(X, k=t.strip_neighbours, distance_upper_bound=ctx.link)
+    nb = np.unique(nb[np.isfinite(dd)])
+    W = ctx.pre.points[nb]
+    W = W[fam.distance(prim, W) < ctx.tau]
+    if len(W) < t.strip_min_points:
+        return False
+    ev = np.linalg.eigvalsh(np.cov(W.T))
+    return bool(np.sqrt(max(ev[1], 0)) >= width)
 
 
 def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive, float]]:
@@ -153,7 +170,7 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
         H = smooth(accumulate(grid, voter, vals), grid.wrap)
         # A complex family's candidate costs tens of milliseconds of nonlinear
         # fits; its surface is one of the most persistent peaks.
-        cap = ctx.max_peaks if fam.role == "simple" else min(ctx.max_peaks, COMPLEX_MAX_PEAKS)
+        cap = ctx.max_peaks if fam.role == "simple" else min(ctx.max_peaks, ctx.tol.recognition.complex_max_peaks)
         pk, _ = persistent_peaks(H, ctx.persistence, grid.wrap, max_peaks=cap)
         pk = pk[H.ravel()[pk] >= ctx.min_votes]
         if fam.stacked and not ctx.local and len(pk):
@@ -163,7 +180,7 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
             # persistence falls under the threshold relative to the top. Its
             # own votes, without the top's points, confirm it.
             more = _beside_top(fam, pl, grid, H, pk, P, Pl, voter, vals, ctx)
-            pk = np.concatenate([pk, more[:BESIDE_TOP_PEAKS]])
+            pk = np.concatenate([pk, more[:ctx.tol.recognition.beside_top_peaks]])
         for v in grid.cell_center(pk):
             prim = fam.primitive(v, pl)
             if prim is not None and fam.valid(prim, ctx):
@@ -181,7 +198,7 @@ def _beside_top(fam: Family, pl, grid, H: np.ndarray, pk: np.ndarray, P: np.ndar
     ``pk``: the peaks kept already, the top one first."""
     none = np.zeros(0, np.int64)
     top = float(H.max())
-    near, _ = persistent_peaks(H, 0.5 * ctx.persistence, grid.wrap)
+    near, _ = persistent_peaks(H, ctx.tol.recognition.beside_top_persistence * ctx.persistence, grid.wrap)
     near = near[~np.isin(near, pk)]
     if not len(near):
         return none
@@ -211,9 +228,10 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     np.minimum.at(dmin, pts, d)
     # On a noisy cloud some candidate among dozens passes through almost any
     # point: a margin under the noise would shred the true surface.
-    margin = 0.25 * ctx.tau
-    if ctx.noisy:
-        margin = max(margin, 2.0 * ctx.pre.noise)
+    t = ctx.tol.recognition
+    margin = t.compete_taus * ctx.tau
+    if ctx.policy.compete_above_noise:
+        margin = max(margin, t.compete_sigmas * ctx.pre.noise)
     keep = d <= dmin[pts] + margin
     out = []
     start = 0
@@ -231,20 +249,18 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     return out
 
 
-#: Share of its points a selected candidate must still hold free to be accepted.
-KEEP_SHARE = 0.6
-
-
 def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Candidate]:
     """Greedy choice among competing candidates for the points ``avail`` (bool (n,)) leaves.
 
     After the point-wise competition, largest first; a candidate competes with
-    the others that share more than 1 − ``KEEP_SHARE`` of the smaller one's
+    the others that share more than 1 − ``keep_share`` of the smaller one's
     points (taking either would leave the other too few to be accepted), and
     among them the lowest MFE wins (a more complex family must beat a simpler
     one clearly).
     """
     cands = compete(cands, ctx)
+    keep_share = ctx.tol.recognition.keep_share
+    settle_share = ctx.tol.recognition.settle_share
     free = avail.copy()
     judged = _noise_floored(cands, ctx)
     order = sorted(range(len(cands)), key=lambda i: (-len(cands[i].indices), cands[i].mfe))
@@ -259,24 +275,24 @@ def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Cand
             if j == i or done[j]:
                 continue
             inter = np.intersect1d(sets[i], sets[j], assume_unique=True).size
-            # Whichever is taken, the other must keep KEEP_SHARE of its points
+            # Whichever is taken, the other must keep keep_share of its points
             # to be accepted: a candidate competes with every one that could
             # displace it.
-            if inter > (1.0 - KEEP_SHARE) * min(len(sets[i]), len(sets[j])):
+            if inter > (1.0 - keep_share) * min(len(sets[i]), len(sets[j])):
                 group.append(j)
         best = group[0]
         for j in group[1:]:
-            if _better(judged[j], judged[best]):
+            if _better(judged[j], judged[best], ctx.tol.recognition):
                 best = j
         # Only the candidates that mostly overlap the winner are settled; a
         # larger one that merely contains it stays in the running.
         for j in group:
             inter = np.intersect1d(sets[best], sets[j], assume_unique=True).size
-            if j == best or inter > 0.5 * min(len(sets[best]), len(sets[j])):
+            if j == best or inter > settle_share * min(len(sets[best]), len(sets[j])):
                 done[j] = True
         c = cands[best]
         left = c.indices[free[c.indices]]
-        if len(left) < max(ctx.min_points, KEEP_SHARE * len(c.indices)):
+        if len(left) < max(ctx.min_points, keep_share * len(c.indices)):
             continue
         c = replace(c, indices=left)
         free[left] = False
@@ -297,12 +313,13 @@ def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     large as the largest where that is lower (curvature inflates the
     estimate on threads; a subset cannot be that large).
     """
-    if not ctx.noisy or not cands:
+    if not ctx.policy.floor_selection or not cands:
         return cands
+    t = ctx.tol.recognition
     md = np.array([float(c.distances.mean()) if len(c.distances) else 0.0 for c in cands])
     size = np.array([len(c.indices) for c in cands])
-    big = (size >= 0.9 * size.max()) & (md > 0)
-    floor = min(0.8 * ctx.pre.noise, float(md[big].min()) if big.any() else np.inf)
+    big = (size >= t.noise_floor_size * size.max()) & (md > 0)
+    floor = min(t.noise_mean_sigmas * ctx.pre.noise, float(md[big].min()) if big.any() else np.inf)
     out = []
     for c, m, n in zip(cands, md, size):
         if c.mfe <= 0 or m <= 0:
@@ -310,19 +327,19 @@ def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
             continue
         # An excess below two standard errors of the mean |d| (0.755 m /
         # sqrt(n) for Gaussian noise) is the floor itself.
-        least = floor * min(0.05, 1.5 / np.sqrt(max(n, 1)))
+        least = floor * min(t.noise_floor_least, t.noise_floor_se / np.sqrt(max(n, 1)))
         out.append(replace(c, mfe=c.mfe * max(m - floor, least) / m))
     return out
 
 
-def _better(a: Candidate, b: Candidate) -> bool:
+def _better(a: Candidate, b: Candidate, t: RecognitionTolerances) -> bool:
     """Whether candidate a should replace b for the same points."""
     ca, cb = a.family.precedence, b.family.precedence
     if ca == cb and not (a.family.role == b.family.role == "simple"):
         # Two complex candidates (several profiles, placements): a small piece
         # fitted marginally better must not replace one explaining far more.
         def covers(x: Candidate, y: Candidate) -> bool:
-            return len(x.indices) >= 1.5 * len(y.indices) and x.mfe <= 1.25 * y.mfe
+            return len(x.indices) >= t.covers_size * len(y.indices) and x.mfe <= t.covers_mfe * y.mfe
         if covers(a, b) or covers(b, a):
             return covers(a, b)
     if ca == cb:
@@ -330,8 +347,8 @@ def _better(a: Candidate, b: Candidate) -> bool:
     simple, cplx = (a, b) if ca < cb else (b, a)
     # The more complex family wins with a clearly lower error, or when it
     # explains many more points about as well.
-    cplx_wins = (cplx.mfe < 0.5 * simple.mfe and simple.mfe - cplx.mfe > 2e-5) or (
-        len(cplx.indices) >= 1.5 * len(simple.indices) and cplx.mfe <= 1.25 * simple.mfe)
+    cplx_wins = (cplx.mfe < t.complex_wins_mfe * simple.mfe and simple.mfe - cplx.mfe > t.complex_wins_abs) or (
+        len(cplx.indices) >= t.covers_size * len(simple.indices) and cplx.mfe <= t.covers_mfe * simple.mfe)
     return (a is cplx) == cplx_wins
 
 
@@ -348,7 +365,7 @@ def candidates(idx: np.ndarray, families: list[Family], ctx: Context, avail: np.
     idx = idx[avail[idx]]
     if len(idx) < ctx.min_points:
         return []
-    k = min(10, len(idx))
+    k = min(ctx.tol.recognition.neighbours, len(idx))
     nbr = cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k)[1]
     ctx = replace(ctx, neighbors=nbr)
     cands: list[Candidate] = []
@@ -357,7 +374,7 @@ def candidates(idx: np.ndarray, families: list[Family], ctx: Context, avail: np.
         # clouds: there a slice of a cone or torus by a simpler family fits
         # within the noise, the tangent-slice gate of evaluate() cannot
         # reject it, and only the whole surface's candidate can beat it.
-        if not (ctx.local or fam.search == "whole" or (ctx.noisy and fam.role == "simple")):
+        if not (ctx.local or fam.search == "whole" or (ctx.policy.cluster_families_first and fam.role == "simple")):
             continue
         for prim, coarse in propose(fam, idx, ctx):
             cands.extend(evaluate(fam, prim, idx, ctx, coarse))
