@@ -7,7 +7,7 @@ import pytest
 
 import houghcad
 from houghcad import pipeline, synth
-from houghcad.blend import LR_MIN, fit_fillet, profile_distance, section
+from houghcad.corners import LR_MIN, fit_fillet, profile_distance, section
 from houghcad.evaluate import classification_measures
 from houghcad.families import REGISTRY, Primitive
 

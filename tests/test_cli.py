@@ -391,7 +391,7 @@ def test_segment_real_pipeline(tmp_path, capsys):
     # One block per face: a maximal primitive contributes one block per part.
     assert prim.count("Primitive") == sum(max(1, len(s.get("parts", []))) for s in data["segments"])
     table = capsys.readouterr().out
-    assert "plane" in table and "unsegmented" in table
+    assert "plane" in table and "unsegmented" in table and "scales" in table
 
 
 def test_segment_trace_writes_the_labels_after_every_pass(tmp_path):
@@ -415,6 +415,32 @@ def test_segment_trace_writes_the_labels_after_every_pass(tmp_path):
     mine = sorted(np.bincount(lab[lab >= 0]).tolist())
     assert mine == sorted(len(s["indices"]) for s in data["segments"])
     np.testing.assert_array_equal(np.flatnonzero(lab < 0), data["unsegmented"])
+
+
+def test_segment_passes_noise_persistence_min_points_and_tolerances(tmp_path, fake_pipeline):
+    inp = _write_xyz(tmp_path / "parts.xyz", _parts_cloud())
+    assert main(["segment", str(inp), "-o", str(tmp_path / "o.json"), "-q", "--noise", "noisy",
+                 "--persistence", "0.2", "--min-points", "25", "--tolerance", "recognition.keep_share=0.5",
+                 "--tolerance", "splitting.max_rounds=3"]) == 0
+    call = fake_pipeline.calls[-1]
+    assert call["noise"] == "noisy" and call["persistence"] == 0.2 and call["min_points"] == 25
+    assert call["tolerances"] == {"recognition.keep_share": 0.5, "splitting.max_rounds": 3.0}
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--tolerance", "recognition.keep=1"], "unknown tolerance recognition.keep"),
+    (["--tolerance", "recognition.keep_share"], "expected STAGE.NAME=VALUE"),
+    (["--tolerance", "splitting.max_rounds=2.5"], "whole number"),
+    (["--persistence", "1.5"], "not in (0, 1)"),
+    (["--min-points", "0"], "must be >= 1"),
+    (["--noise", "loud"], "invalid choice"),
+])
+def test_segment_bad_tuning_options_exit_2_with_one_line(tmp_path, capsys, fake_pipeline, argv, message):
+    inp = _write_xyz(tmp_path / "parts.xyz", _parts_cloud())
+    assert main(["segment", str(inp), "-o", str(tmp_path / "o.json")] + argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not fake_pipeline.calls and not (tmp_path / "o.json").exists()
 
 
 def test_segment_trace_on_a_file_is_refused(tmp_path, capsys, fake_pipeline):

@@ -8,7 +8,8 @@ import pytest
 import houghcad
 from _helpers import state_before
 from houghcad import synth
-from houghcad.pipeline import EXTENSION, PAPER_5_2, PAPER_5_3, PAPER_5_4, PIPELINE, Pass, Run
+from houghcad.passes import EXTENSION, PAPER_5_2, PAPER_5_3, PAPER_5_4, Pass, Run
+from houghcad.pipeline import PIPELINE, pass_names
 from houghcad.associate import Associator
 from houghcad.families import select
 from houghcad.state import Segmentation
@@ -33,12 +34,8 @@ def test_the_pipeline_reads_like_the_paper():
     assert len(set(names)) == len(names)
 
 
-def _names(p: Pass, prefix: str = "") -> list[str]:
-    return [prefix + p.name] + [n for q in p.after for n in _names(q, prefix + p.name + ".")]
-
-
 def test_timing_gives_every_pass_that_ran_by_name(clean_part, noisy_part):
-    declared = {n for p in PIPELINE for n in _names(p)}
+    declared = set(pass_names())
     for cloud, noisy in ((clean_part, False), (noisy_part, True)):
         steps: list[str] = []
         res = houghcad.segment(cloud.points, trace=lambda step, name, seg: steps.append(name))
@@ -97,3 +94,13 @@ def test_a_follow_up_runs_only_when_its_pass_changed_the_state(noisy_part):
     assert "revisit_poor_fits" in steps
     follow = [s for s in steps if s.startswith("revisit_poor_fits.")]
     assert follow in ([], ["revisit_poor_fits.absorb", "revisit_poor_fits.settle_noisy_edges"])
+
+
+def test_skipped_passes_do_not_run_and_unknown_ones_are_refused(noisy_part):
+    steps: list[str] = []
+    houghcad.segment(noisy_part.points, skip=("fillets", "consolidation.absorb"),
+                     trace=lambda step, name, seg: steps.append(name))
+    assert "fillets" not in steps and not any(s.startswith("fillets.") for s in steps)
+    assert "consolidation" in steps and "consolidation.absorb" not in steps
+    with pytest.raises(houghcad.InputError, match="unknown pass 'filets'"):
+        houghcad.segment(noisy_part.points, skip=("filets",))

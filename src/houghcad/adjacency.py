@@ -1,56 +1,149 @@
-"""Adjacency between segments: which segments touch, and how."""
+"""Adjacency between segments: one graph, with contact counts, for every pass that asks.
+
+Two segments touch where a point of one lies within the link distance of a
+point of the other. :class:`SegmentGraph` records, for every pair of segments
+in contact, the pairs of points across their boundary, how many of each
+side's points touch the other, and which cross pairs those are. The passes
+read it with their own rule:
+
+- consolidation: a tangent-continuous boundary (:func:`smooth_adjacency`);
+- fillets: a corner, by the number of close pairs (:mod:`houghcad.blend`);
+- association: a line contact on both sides, not a point (:mod:`houghcad.associate`).
+"""
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import dataclass
 
-from .boundaries import _neighbour_owners
+import numpy as np
+from scipy.spatial import cKDTree
+
 from .context import Context
 from .state import Segmentation
 
 
+@dataclass(frozen=True)
+class SegmentGraph:
+    """Segments in contact, with their contact counts.
+
+    Attributes
+    ----------
+    n_segments : int
+    edges : ndarray (k, 2) of int64
+        Pairs (u < v) of segments with at least one close pair of points.
+    close_pairs : ndarray (k,)
+        Pairs of points across each edge, closer than the link.
+    contact : ndarray (k, 2)
+        Distinct points of u touching v, and of v touching u.
+    cross : ndarray (m, 2) of int64
+        The close point pairs (global indices), u's point first.
+    edge_of : ndarray (m,)
+        The edge (row of ``edges``) of each cross pair.
+    """
+
+    n_segments: int
+    edges: np.ndarray
+    close_pairs: np.ndarray
+    contact: np.ndarray
+    cross: np.ndarray
+    edge_of: np.ndarray
+
+    @classmethod
+    def build(cls, labels: np.ndarray, P: np.ndarray, link: float, k: int | None = None,
+              tree: cKDTree | None = None) -> "SegmentGraph":
+        """The graph of the segments ``labels`` (n,) (-1: free) over points P (n, 3).
+
+        With ``k`` the contacts are each segmented point's k nearest points
+        of the cloud within ``link`` (``tree``: a KD-tree on all of P), read
+        from the querying point: ``close_pairs`` counts these directed pairs,
+        ``contact`` the distinct querying points on each side, and ``cross``
+        holds (querying point, neighbour). Without it every pair of segmented
+        points closer than ``link`` counts once.
+        """
+        labels = np.asarray(labels, dtype=np.int64)
+        m = max(int(labels.max(initial=-1)) + 1, 1)
+        owned = np.flatnonzero(labels >= 0)
+        if k is None:
+            close = cKDTree(P[owned]).query_pairs(link, output_type="ndarray") if len(owned) > 1 else \
+                np.zeros((0, 2), np.int64)
+            a, b = owned[close[:, 0]], owned[close[:, 1]]
+        else:
+            tree = cKDTree(P) if tree is None else tree
+            dist, nb = tree.query(P[owned], k=min(k, len(P)), distance_upper_bound=link)
+            ok = np.isfinite(dist)
+            a = np.broadcast_to(owned[:, None], nb.shape)[ok]
+            b = nb[ok].astype(np.int64)
+        la, lb = labels[a], labels[b]
+        diff = (lb >= 0) & (la != lb)
+        a, b, la, lb = a[diff], b[diff], la[diff], lb[diff]
+        if k is None:  # u's point first
+            swap = la > lb
+            a, b, la, lb = np.where(swap, b, a), np.where(swap, a, b), np.minimum(la, lb), np.maximum(la, lb)
+        u, v = np.minimum(la, lb), np.maximum(la, lb)
+        keys, edge_of, close_pairs = np.unique(u * m + v, return_inverse=True, return_counts=True)
+        edge_of = edge_of.ravel().astype(np.int64)
+        edges = np.stack([keys // m, keys % m], axis=1)
+        contact = np.zeros((len(keys), 2), np.int64)
+        n = max(len(P), 1)
+        if k is None:
+            sides = ((a, np.ones(len(a), bool)), (b, np.ones(len(b), bool)))
+        else:  # the querying point, on whichever side it lies
+            sides = ((a, la == u), (a, la == v))
+        for side, (pts, on) in enumerate(sides):
+            distinct = np.unique(edge_of[on] * n + pts[on])
+            contact[:, side] = np.bincount(distinct // n, minlength=len(keys))
+        return cls(m, edges, close_pairs, contact, np.stack([a, b], axis=1), edge_of)
+
+    @classmethod
+    def of(cls, seg: Segmentation, ctx: Context, k: int | None = None) -> "SegmentGraph":
+        """The graph of a segmentation state, at the run's link distance (see :meth:`build`)."""
+        return cls.build(seg.labels, ctx.pre.points, ctx.link, k, ctx.pre.tree)
+
+    def neighbours(self, keep: np.ndarray | None = None) -> dict[int, set[int]]:
+        """Each segment's neighbours over the edges ``keep`` (bool (k,); default all)."""
+        out: dict[int, set[int]] = {}
+        sel = self.edges if keep is None else self.edges[keep]
+        for u, v in sel.tolist():
+            out.setdefault(u, set()).add(v)
+            out.setdefault(v, set()).add(u)
+        return out
+
+    def agreement(self, normals: np.ndarray, cos_min: float) -> np.ndarray:
+        """Share (k,) of each edge's cross pairs whose surface normals
+        ``normals`` (n, 3) agree within the angle of cosine ``cos_min``."""
+        cos = np.abs(np.einsum("ij,ij->i", normals[self.cross[:, 0]], normals[self.cross[:, 1]]))
+        agree = np.bincount(self.edge_of, weights=cos >= cos_min, minlength=len(self.edges))
+        return agree / np.maximum(self.close_pairs, 1)
+
+
 def smooth_adjacency(seg: Segmentation, ctx: Context, smooth: bool = True,
-                     crease: float | None = None) -> np.ndarray:
+                     crease: float | None = None, graph: SegmentGraph | None = None) -> np.ndarray:
     """Pairs (m, 2) of segments that meet along a tangent-continuous boundary.
 
-    Two segments touch where a point of one has a neighbour (within ``link``)
-    in the other; the contact is smooth where the two primitives' normals at
-    those points agree within the angle tolerance (the fitted surfaces', not
-    the estimated normals, which blur across a crease) for most contacts.
-    A pair needs √(points of the smaller) / ``contact_divisor`` contact points, and ``contact_min``:
-    a boundary, not a corner. ``smooth=False``: any such contact. ``crease``
-    (radians): the angle within which normals agree (default: half the
-    angle tolerance, ``crease_angles``).
+    Contacts are each point's ``neighbours`` nearest points within the link.
+    The contact is smooth where the two primitives' normals at the close
+    pairs agree within half the angle tolerance (``crease_angles``; the fitted
+    surfaces', not the estimated normals, which blur across a crease) for most
+    of them (``smooth_share``). A pair needs √(points of the smaller) /
+    ``contact_divisor`` contact points on its two sides together, and
+    ``contact_min``: a boundary, not a corner. ``smooth=False``: any such
+    contact. ``crease`` (radians): the angle within which normals agree.
     """
     t = ctx.tol.adjacency
     if len(seg) < 2:
         return np.zeros((0, 2), np.int64)
-    P = ctx.pre.points
-    owner = seg.owner()
-    sn = np.zeros_like(P)
-    for s in seg:
-        sn[s.indices] = s.family.surface_normals(s.prim, P[s.indices])
-    pts = np.flatnonzero(owner >= 0)
-    nb, other = _neighbour_owners(owner, pts, ctx, ctx.link, t.neighbours)
-    mine = owner[pts][:, None]
-    cos = np.abs(np.einsum("ij,ikj->ik", sn[pts], sn[nb]))
-    mask = (other >= 0) & (other != mine)
-    if not mask.any():
+    g = SegmentGraph.of(seg, ctx, t.neighbours) if graph is None else graph
+    if not len(g.edges):
         return np.zeros((0, 2), np.int64)
-    n = len(seg)
-    a, b = np.broadcast_to(mine, other.shape)[mask], other[mask]
-    pi = np.broadcast_to(pts[:, None], other.shape)[mask]
-    pair = np.minimum(a, b) * n + np.maximum(a, b)
-    # Per pair: contact points (each once) and the share of contacts whose
-    # normals agree within half the tolerance (a crease of a few degrees
-    # between two faces is still a crease).
-    key = np.unique(pair * len(P) + pi)
-    pair_u, count = np.unique(key // len(P), return_counts=True)
-    agree = cos[mask] >= np.cos(t.crease_angles * ctx.angle if crease is None else crease)
-    share = np.bincount(np.searchsorted(pair_u, pair), weights=agree, minlength=len(pair_u)) / \
-        np.bincount(np.searchsorted(pair_u, pair), minlength=len(pair_u))
     sizes = seg.sizes()
-    u, v = pair_u // n, pair_u % n
+    u, v = g.edges[:, 0], g.edges[:, 1]
     least = np.maximum(t.contact_min, np.sqrt(np.minimum(sizes[u], sizes[v])) / t.contact_divisor)
-    keep = ((share >= t.smooth_share) | (not smooth)) & (count >= least)
-    return np.stack([u[keep], v[keep]], axis=1)
+    keep = g.contact.sum(axis=1) >= least
+    if smooth:
+        P = ctx.pre.points
+        sn = np.zeros_like(P)
+        for s in seg:
+            sn[s.indices] = s.family.surface_normals(s.prim, P[s.indices])
+        angle = t.crease_angles * ctx.angle if crease is None else crease
+        keep &= g.agreement(sn, float(np.cos(angle))) >= t.smooth_share
+    return g.edges[keep]

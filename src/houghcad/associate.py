@@ -36,9 +36,9 @@ import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from .families.base import Family, Frame, Primitive, regular_indices, unit
+from .adjacency import SegmentGraph
 from .state import SegmentView
 from .tolerances import AssociationTolerances
 
@@ -269,36 +269,22 @@ class Associator:
         Points closer than ``link`` to the other segment are the contact. Two
         pieces of one face cut apart by the splitting phase share a boundary
         about as long as their width; two CAD faces of one surface that meet
-        at a corner (Fit4CAD: PC104's four faces of one cylinder) touch at a
-        few points. A line contact holds at least ``contact`` × √(points of
-        the smaller) points on each side; fewer on either side is a point
-        contact, or two faces a little more than ``link`` apart that come
-        close at a few points (Fit4CAD: PC150's two faces of one cylinder).
+        at a corner touch at a few points. A line contact holds at least
+        ``contact`` × √(points of the smaller) points on each side; fewer on
+        either side is a point contact, or two faces a little more than
+        ``link`` apart that come close at a few points.
         """
         if len(cands) < 2:
             return set()
+        labels = np.full(len(self._pre.points), -1, dtype=np.int64)
+        for k, c in enumerate(cands):
+            labels[c.indices] = k
+        g = SegmentGraph.build(labels, self._pre.points, link)
         sizes = np.array([len(c.indices) for c in cands])
-        idx = np.concatenate([c.indices for c in cands])
-        lab = np.repeat(np.arange(len(cands)), sizes)
-        pairs = cKDTree(self._pre.points[idx]).query_pairs(link, output_type="ndarray")
-        a, b = lab[pairs[:, 0]], lab[pairs[:, 1]]
-        diff = a != b
-        if not diff.any():
-            return set()
-        pa, pb, a, b = pairs[diff, 0], pairs[diff, 1], a[diff], b[diff]
-        # (segment, other segment, point of the segment) once each: contact
-        # points per ordered pair.
-        n = len(cands)
-        key = np.unique(np.concatenate([(a * n + b) * len(idx) + pa, (b * n + a) * len(idx) + pb]))
-        seg_pair, count = np.unique(key // len(idx), return_counts=True)
-        i, j = seg_pair // n, seg_pair % n
-        lo, hi = np.minimum(i, j), np.maximum(i, j)
-        # Every close pair counts a point on each side, so both ordered pairs are there.
-        least: dict[tuple[int, int], int] = {}
-        for u, v, c in zip(lo.tolist(), hi.tolist(), count.tolist()):
-            least[(u, v)] = min(least.get((u, v), c), c)
-        return {(u, v) for (u, v), c in least.items()
-                if c >= self.tol.contact * np.sqrt(min(sizes[u], sizes[v]))}
+        least = g.contact.min(axis=1)
+        u, v = g.edges[:, 0], g.edges[:, 1]
+        ok = least >= self.tol.contact * np.sqrt(np.minimum(sizes[u], sizes[v]))
+        return {(int(a), int(b)) for a, b in g.edges[ok].tolist()}
 
     def _parts(self, members: list[int], adjacency: set[tuple[int, int]]) -> list[list[int]]:
         """Connected components of members under adjacency (lists of members)."""

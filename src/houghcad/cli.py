@@ -66,6 +66,25 @@ def _seed(text: str) -> int:
     return value
 
 
+def _open_fraction(text: str) -> float:
+    """``--persistence``: a number in (0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and 0.0 < value < 1.0):
+        raise argparse.ArgumentTypeError(f"{text} is not in (0, 1)")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    """``--min-points``: an integer >= 1."""
+    value = _seed(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -108,6 +127,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-merge", action="store_true",
                    help="keep segments lying on one surface apart instead of merging them into one "
                    "maximal primitive (groups are found either way)")
+    p.add_argument("--noise", choices=("auto", "clean", "noisy"), default="auto",
+                   help="noise policy: 'auto' reads the cloud as noisy when its estimated noise is at least 0.15 "
+                   "point spacings; 'clean' and 'noisy' force it (default: auto)")
+    p.add_argument("--persistence", type=_open_fraction, default=None, metavar="F",
+                   help="peak persistence threshold, a fraction of the accumulator's maximum in (0, 1) (default: 0.1)")
+    p.add_argument("--min-points", type=_positive_int, default=None, metavar="N",
+                   help="smallest segment in points (default: max(8, points / 5000))")
+    p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
+                   help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
+                   "docs/tolerances.md lists them")
     p.add_argument("--trace", metavar="DIR",
                    help="also write the labels after every pass of the pipeline, one PLY per pass named "
                    "NN_PASS.ply, to see where a cloud goes wrong (DIR is created if needed)")
@@ -245,6 +274,24 @@ def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | N
     return written
 
 
+def _tolerances(items: Sequence[str]) -> dict[str, float]:
+    """``["stage.name=value", ...]`` as ``{"stage.name": value}``, checked
+    (a bad one is a one-line InputError before the cloud is read)."""
+    from .tolerances import Tolerances
+
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError("expected STAGE.NAME=VALUE")
+            out[name.strip()] = float(text)
+            Tolerances.from_dict(out)
+        except ValueError as exc:
+            raise InputError(f"--tolerance {item}: {exc}") from None
+    return out
+
+
 def _trace_writer(directory: Path, points: Any) -> Callable[[int, str, Any], None]:
     """A ``trace(step, pass_name, state)`` callback writing ``directory/NN_PASS.ply``
     (the directory is created now, before the run)."""
@@ -303,6 +350,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 
         _load_family_files(args.family_file)
         select(args.families)  # unknown names fail now, not after reading the cloud
+    tolerances = _tolerances(args.tolerance) if args.tolerance else None
     cloud = read_points(inp)
     _check_output(out, [inp])
     if prim is not None:
@@ -317,7 +365,13 @@ def _cmd_segment(args: argparse.Namespace) -> int:
         _check_output(path, [inp])
         taken.append(path)
 
-    extra: dict[str, Any] = {}
+    extra: dict[str, Any] = {"noise": args.noise}
+    if args.persistence is not None:
+        extra["persistence"] = args.persistence
+    if args.min_points is not None:
+        extra["min_points"] = args.min_points
+    if tolerances:
+        extra["tolerances"] = tolerances
     if args.trace:
         extra["trace"] = _trace_writer(Path(args.trace), cloud.points)
     result = _run_segmentation(

@@ -12,7 +12,7 @@ timed under its name in ``Result.timing``, and ``Segmenter(trace=...)``
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -25,7 +25,6 @@ from .boundaries import dissolve_redundant, settle_edges, settle_noisy_edges
 from .consolidation import consolidate, prefer_planes, revisit_poor_fits
 from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
 from .errors import InputError
-from .families import Family
 from .growth import absorb, accept
 from .output import build_segments
 from .noise import NOISE_CHOICES, choose
@@ -33,56 +32,18 @@ from .preprocess import preprocess
 from .recognize import recognize, refine
 from .result import Result
 from .splitting import splitting_phase
+from .passes import EXTENSION, PAPER_5_2, PAPER_5_3, PAPER_5_4, Pass, Run, Runner, TraceFn, monotonic
 from .state import SegmentRecord, Segmentation, checks_enabled
 from .tolerances import Tolerances
 
-PAPER_5_2 = "paper §5.2"
-PAPER_5_3 = "paper §5.3"
-PAPER_5_4 = "paper §5.4"
-EXTENSION = "extension"
 
 #: ε, as a fraction of the diagonal, must stay below this.
 MAX_EPSILON = 0.5
-# Progress fractions reported: the passes in order, the splitting phase
-# within its own span (it takes most of the time), then the output.
-_PASSES_START = 0.1
-_PASSES_SPAN = 0.85
-_PASSES_END = 0.95
+# Progress: the splitting phase reports within its own span (it takes most
+# of the time), the output last.
 _SPLIT_START = 0.3
 _SPLIT_SPAN = 0.6
 _OUTPUT_AT = 0.96
-
-
-@dataclass(frozen=True)
-class Run:
-    """What the passes read besides the state.
-
-    Attributes
-    ----------
-    ctx : Context
-        Scales and thresholds of the run.
-    families : list of Family
-        The selected families.
-    voted : list of Family
-        Those voted in recognition (a family refining a selected one is
-        offered its base's segments instead, see :func:`refine_pass`).
-    associator : Associator
-    progress : callable
-        ``progress(stage, fraction)``.
-    """
-
-    ctx: Context
-    families: list[Family]
-    voted: list[Family]
-    associator: Associator
-    progress: Callable[[str, float], None] = lambda stage, fraction: None
-
-
-PassFn = Callable[[Segmentation, Run], Segmentation]
-
-
-def _always(ctx: Context) -> bool:
-    return True
 
 
 def _nearest_edges(ctx: Context) -> bool:
@@ -91,23 +52,6 @@ def _nearest_edges(ctx: Context) -> bool:
 
 def _shared_edges(ctx: Context) -> bool:
     return not ctx.policy.nearest_edges
-
-
-@dataclass(frozen=True)
-class Pass:
-    """A named step over the state.
-
-    ``when(ctx)`` decides whether it runs. ``after`` are follow-up passes, run
-    after it (always, or with ``only_if_changed`` only when it wrote to the
-    state); they are timed as ``name.follow_up``.
-    """
-
-    name: str
-    run: PassFn
-    source: str
-    when: Callable[[Context], bool] = _always
-    after: tuple["Pass", ...] = ()
-    only_if_changed: bool = False
 
 
 # ---------------------------------------------------------------------------- the passes
@@ -234,52 +178,24 @@ PIPELINE: tuple[Pass, ...] = (
     ASSOCIATION,
 )
 
-#: ``trace(step, name, state)``: called after every pass that ran.
-TraceFn = Callable[[int, str, Segmentation], None]
 
+@dataclass(frozen=True)
+class _Saved:
+    """The state before the association, kept for :meth:`Segmenter.reassociate`."""
 
-@dataclass
-class _Runner:
-    """Runs passes in order, timing each and tracing the state after it."""
-
+    seg: Segmentation
     run: Run
-    timing: dict[str, float] = field(default_factory=dict)
-    trace: TraceFn | None = None
-    check: bool = False
-    step: int = 0
-
-    def __call__(self, p: Pass, seg: Segmentation, prefix: str = "") -> Segmentation:
-        if not p.when(self.run.ctx):
-            return seg
-        name = prefix + p.name
-        self.run.progress(name, min(_PASSES_START + _PASSES_SPAN * self.step / len(PIPELINE), _PASSES_END))
-        before = seg.version
-        t = time.perf_counter()
-        seg = p.run(seg, self.run)
-        self.timing[name] = self.timing.get(name, 0.0) + time.perf_counter() - t
-        self.step += 1
-        if self.check:
-            seg.check()
-        if self.trace is not None:
-            self.trace(self.step, name, seg)
-        if p.after and (seg.version != before or not p.only_if_changed):
-            for q in p.after:
-                seg = self(q, seg, name + ".")
-        return seg
+    timing: dict[str, float]
+    points: np.ndarray
+    source: str | None
 
 
-def _monotonic(progress: Callable[[str, float], None] | None) -> Callable[[str, float], None]:
-    """``progress`` with fractions that never go back (passes after the
-    splitting phase report below where its own progress reached)."""
-    if progress is None:
-        return lambda stage, fraction: None
-    last = [0.0]
+def pass_names() -> list[str]:
+    """The names of every declared pass, follow-ups as ``pass.follow_up``."""
+    def names(p: Pass, prefix: str = "") -> list[str]:
+        return [prefix + p.name] + [n for q in p.after for n in names(q, prefix + p.name + ".")]
 
-    def report(stage: str, fraction: float) -> None:
-        last[0] = max(last[0], float(fraction))
-        progress(stage, last[0])
-
-    return report
+    return [n for p in PIPELINE for n in names(p)]
 
 
 class Segmenter:
@@ -323,6 +239,9 @@ class Segmenter:
         Named thresholds of every stage (:mod:`houghcad.tolerances`), a
         :class:`~houghcad.tolerances.Tolerances` or ``{"stage": {"name":
         value}}``; the rest keep their defaults.
+    skip : sequence of str
+        Names of passes not to run (see :func:`pass_names`; a skipped pass's
+        follow-ups are skipped with it), for ablation and debugging.
 
     Attributes
     ----------
@@ -339,7 +258,7 @@ class Segmenter:
                  progress: Callable[[str, float], None] | None = None, merge: bool = True,
                  association: dict[str, Any] | None = None, trace: str | Path | TraceFn | None = None,
                  check: bool | None = None, noise: str = "auto",
-                 tolerances: Tolerances | dict[str, Any] | None = None):
+                 tolerances: Tolerances | dict[str, Any] | None = None, skip: tuple[str, ...] = ()):
         self.families = families
         self.epsilon = epsilon
         self.normals_method = normals_method
@@ -353,6 +272,7 @@ class Segmenter:
         self.check = check
         self.noise = noise
         self.tolerances = tolerances
+        self.skip = skip
 
     def get_options(self) -> dict[str, Any]:
         fams = self.families
@@ -360,7 +280,7 @@ class Segmenter:
                 "epsilon": self.epsilon, "normals_method": self.normals_method,
                 "persistence": self.persistence, "min_points": self.min_points, "seed": self.seed,
                 "merge": bool(self.merge), "association": dict(self.association or {}), "noise": self.noise,
-                "tolerances": self._tolerances().to_dict()}
+                "tolerances": self._tolerances().to_dict(), "skip": list(self.skip)}
 
     def tolerances_dict(self) -> dict[str, Any]:
         """``tolerances`` as ``{stage: {name: value}}`` (without the ``association`` options)."""
@@ -396,6 +316,10 @@ class Segmenter:
         if self.noise not in NOISE_CHOICES:
             raise InputError(f"noise must be one of {', '.join(NOISE_CHOICES)}, got {self.noise!r}")
         tol = self._tolerances()
+        skip = [self.skip] if isinstance(self.skip, str) else list(self.skip)
+        unknown = sorted(set(skip) - set(pass_names()))
+        if unknown:
+            raise InputError(f"unknown pass {unknown[0]!r} to skip (passes: {', '.join(pass_names())})")
         associator = self._associator(self.merge, tol)
         fams = fam_mod.select(self.families)
         # A family refining a selected one is not voted: it would tie with its
@@ -403,19 +327,20 @@ class Segmenter:
         # after recognition instead (see ``refine_pass``).
         names = {f.name for f in fams}
         voted = [f for f in fams if f.refines not in names]
-        report = _monotonic(self.progress)
+        report = monotonic(self.progress)
 
         t0 = time.perf_counter()
         report("preprocess", 0.0)
         pre = preprocess(points, normals, method=self.normals_method, seed=self.seed, noise=self.noise)
         ctx = self._context(pre, len(points), tol)
         run = Run(ctx, fams, voted, associator, report)
-        runner = _Runner(run, {"preprocess": time.perf_counter() - t0}, self._tracer(points),
-                         checks_enabled() if self.check is None else bool(self.check))
+        runner = Runner(run, {"preprocess": time.perf_counter() - t0}, self._tracer(points),
+                        checks_enabled() if self.check is None else bool(self.check), total=len(PIPELINE),
+                        skip=frozenset(skip))
         seg = Segmentation(len(points))
         for p in PIPELINE:
             if p is ASSOCIATION:
-                self._before_association = (seg.copy(), run, dict(runner.timing), points, source)
+                self._before_association = _Saved(seg.copy(), run, dict(runner.timing), points, source)
             seg = runner(p, seg)
         self.context_ = ctx
         self.result_ = self._result(seg, run, runner.timing, points, source)
@@ -427,7 +352,8 @@ class Segmenter:
         with other options (cheap: recognition is not repeated); returns a new Result."""
         if not hasattr(self, "_before_association"):
             raise RuntimeError("call fit() first")
-        seg, run, timing, points, source = self._before_association
+        saved = self._before_association
+        seg, run, timing, points, source = saved.seg, saved.run, saved.timing, saved.points, saved.source
         merge = self.merge if merge is None else merge
         tol = run.ctx.tol
         if association is not None:  # these options replace the Segmenter's association options
@@ -438,7 +364,7 @@ class Segmenter:
                 raise InputError(f"tolerances: {exc}") from None
         run = replace(run, ctx=replace(run.ctx, tol=tol), associator=self._associator(merge, tol),
                       progress=lambda s, f: None)
-        runner = _Runner(run, dict(timing))
+        runner = Runner(run, dict(timing))
         return self._result(runner(ASSOCIATION, seg.copy()), run, runner.timing, points, source)
 
     def _result(self, seg: Segmentation, run: Run, timing: dict[str, float], points: np.ndarray,

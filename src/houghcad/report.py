@@ -96,7 +96,8 @@ def summary_table(result: Result) -> str:
 
     One row per family present (segments, points, mean and max MFE), a total
     row, the number of unsegmented points (and their share of the cloud) and
-    the groups (:func:`groups_table`) when there are any, and the wall-clock
+    the scales the run derived (noise policy, σ, spacing, τ, ε), the groups
+    (:func:`groups_table`) when there are any, and the wall-clock
     time, total then per stage.  No trailing newline.
     """
     header = f"{'family':<12}{'segments':>9}{'points':>10}{'mean MFE':>11}{'max MFE':>11}"
@@ -109,6 +110,11 @@ def summary_table(result: Result) -> str:
     n_unseg = len(result.unsegmented)
     share = 100.0 * n_unseg / result.n_points if result.n_points else 0.0
     lines.append(f"{'unsegmented':<12}{'':>9}{n_unseg:>10d}  ({share:.1f}% of {result.n_points} points)")
+    derived = result.options.get("derived") if isinstance(result.options, dict) else None
+    if derived:
+        lines.append(f"{'scales':<12}noise {derived['noise_policy']}: sigma {derived['sigma']:.3g}, "
+                     f"spacing {derived['spacing']:.3g}, tau {derived['tau']:.3g}, "
+                     f"epsilon {derived['epsilon']:.3g} (input units)")
     if result.groups:
         lines.append("")
         lines.append(groups_table(result))

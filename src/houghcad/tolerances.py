@@ -141,7 +141,8 @@ class BoundaryTolerances:
 class AdjacencyTolerances:
     """Which segments touch, and smoothly (:mod:`houghcad.adjacency`)."""
 
-    neighbours: int = tol(8, "neighbours", "points read around each point for contacts")
+    neighbours: int = tol(8, "neighbours", "points read around each point for smooth contacts: the nearest across a "
+                          "boundary tell its smoothness")
     crease_angles: float = tol(0.5, "angle tolerances", "fitted normals agreeing within this are tangent-continuous; "
                                "a crease of a few degrees is still a crease")
     smooth_share: float = tol(0.5, "share", "most contacts must agree for a smooth boundary")

@@ -1,0 +1,85 @@
+"""One segment graph with contact counts, read by consolidation, fillets and association."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from houghcad.adjacency import SegmentGraph, smooth_adjacency
+from _helpers import context, plane_candidate
+from houghcad.state import Segmentation
+
+
+def _grid(n: int = 20, h: float = 0.05) -> np.ndarray:
+    u = np.arange(n) * h
+    return np.stack(np.meshgrid(u, u), -1).reshape(-1, 2)
+
+
+def _folded(angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two square grids of spacing 0.05 meeting along the y axis at ``angle_deg``
+    (180: one plane); labels (n,) 0 and 1, and a third, far segment 2."""
+    g = _grid()
+    left = np.c_[-g[:, 0] - 0.05, g[:, 1], np.zeros(len(g))]
+    a = np.radians(180 - angle_deg)
+    right = np.c_[g[:, 0] * np.cos(a), g[:, 1], g[:, 0] * np.sin(a)]
+    far = left + [5.0, 0, 0]
+    P = np.vstack([left, right, far])
+    return P, np.repeat([0, 1, 2], len(g))
+
+
+def test_all_pairs_graph_counts_the_contact_on_each_side():
+    P, lab = _folded(180)
+    g = SegmentGraph.build(lab, P, link=0.075)
+    assert g.edges.tolist() == [[0, 1]]  # the far segment touches nothing
+    # One row of 20 points on each side touches the other (the diagonal neighbours too).
+    assert g.contact.tolist() == [[20, 20]]
+    assert g.close_pairs[0] == 20 + 2 * 19
+    assert (lab[g.cross[:, 0]] == 0).all() and (lab[g.cross[:, 1]] == 1).all()
+    assert g.neighbours() == {0: {1}, 1: {0}}
+
+
+def test_free_points_are_no_contact():
+    P, lab = _folded(180)
+    lab = lab.copy()
+    lab[lab == 1] = -1
+    g = SegmentGraph.build(lab, P, link=0.075)
+    assert len(g.edges) == 0
+
+
+def test_nearest_neighbour_graph_reads_contacts_from_the_querying_point():
+    P, lab = _folded(180)
+    g = SegmentGraph.build(lab, P, link=0.075, k=3)
+    assert g.edges.tolist() == [[0, 1]]
+    # The querying points of both sides that have a neighbour across.
+    assert g.contact[0, 0] > 0 and g.contact[0, 1] > 0
+    assert (lab[g.cross[:, 0]] != lab[g.cross[:, 1]]).all()
+
+
+def test_agreement_tells_a_crease_from_a_smooth_boundary():
+    for angle, smooth in ((180, True), (90, False)):
+        P, lab = _folded(angle)
+        g = SegmentGraph.build(lab, P, link=0.075)
+        n = np.zeros_like(P)
+        n[lab == 0] = [0, 0, 1.0]
+        a = np.radians(180 - angle)
+        n[lab == 1] = [-np.sin(a), 0, np.cos(a)]
+        n[lab == 2] = [0, 0, 1.0]
+        share = g.agreement(n, np.cos(np.radians(10)))
+        assert (share[0] == 1.0) == smooth and (share[0] == 0.0) != smooth
+
+
+def test_smooth_adjacency_joins_coplanar_pieces_not_faces_at_an_edge():
+    from houghcad import synth
+
+    cloud = synth.PARTS["block_with_hole_and_slot"](seed=0, n_points=6000)
+    ctx = context(cloud.points)
+    names = [p["name"] for p in cloud.primitives]
+    bottom = np.flatnonzero(cloud.labels == names.index("box -z"))
+    wall = np.flatnonzero(cloud.labels == names.index("box -x"))
+    x = ctx.pre.points[bottom] @ np.linalg.svd(ctx.pre.points[bottom] - ctx.pre.points[bottom].mean(0))[2][0]
+    half = x < np.median(x)
+    seg = Segmentation.of(len(cloud.points), [plane_candidate(ctx, bottom[half]), plane_candidate(ctx, bottom[~half]),
+                                              plane_candidate(ctx, wall)])
+    smooth = {tuple(e) for e in smooth_adjacency(seg, ctx).tolist()}
+    anyhow = {tuple(e) for e in smooth_adjacency(seg, ctx, smooth=False).tolist()}
+    assert (0, 1) in smooth and not {(0, 2), (1, 2)} & smooth
+    assert {(0, 2), (1, 2)} & anyhow
