@@ -7,7 +7,8 @@ from .result import Result, Segment
 
 __version__ = "0.1.0"
 
-__all__ = ["InputError", "Result", "Segment", "segment", "Segmenter", "read_points", "define_family", "__version__"]
+__all__ = ["InputError", "Result", "Segment", "segment", "Segmenter", "read_points", "define_family", "Tolerances",
+           "__version__"]
 
 
 def __getattr__(name: str):
@@ -20,6 +21,10 @@ def __getattr__(name: str):
         from .families import define_family
 
         return define_family
+    if name == "Tolerances":
+        from .tolerances import Tolerances
+
+        return Tolerances
     if name == "read_points":
         from .io import read_points
 

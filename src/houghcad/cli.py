@@ -44,15 +44,25 @@ class _Parser(argparse.ArgumentParser):
 # --------------------------------------------------------------------------- argument types
 
 
-def _fraction(text: str) -> float:
-    """``--epsilon``: a fraction of the bounding-box diagonal, 0 < F < 0.5 (as Segmenter)."""
+def _number_in(text: str, hi: float, what: str) -> float:
+    """``text`` as a finite number in (0, hi); otherwise an argparse error saying ``what`` it must be."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and 0.0 < value < 0.5):
-        raise argparse.ArgumentTypeError(f"{text} is not a fraction of the diagonal in (0, 0.5), e.g. 0.01")
+    if not (math.isfinite(value) and 0.0 < value < hi):
+        raise argparse.ArgumentTypeError(f"{text} is not {what}")
     return value
+
+
+def _fraction(text: str) -> float:
+    """``--epsilon``: a fraction of the bounding-box diagonal, 0 < F < 0.5 (as Segmenter)."""
+    return _number_in(text, 0.5, "a fraction of the diagonal in (0, 0.5), e.g. 0.01")
+
+
+def _open_fraction(text: str) -> float:
+    """``--persistence``: a number in (0, 1)."""
+    return _number_in(text, 1.0, "in (0, 1)")
 
 
 def _seed(text: str) -> int:
@@ -63,17 +73,6 @@ def _seed(text: str) -> int:
         raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
-def _open_fraction(text: str) -> float:
-    """``--persistence``: a number in (0, 1)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and 0.0 < value < 1.0):
-        raise argparse.ArgumentTypeError(f"{text} is not in (0, 1)")
     return value
 
 
