@@ -258,15 +258,100 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     """
     noise_policy = noise
     points = np.asarray(points, dtype=np.float64)
+    center, scale0, x = _unit_cube(points)
+    hood = _neighbourhoods(x, k)
+    nrm, dist, noise, used = _choose_normals(x, hood, normals, method, seed, noise_policy)
+    # From the neighbourhoods the normals came from (the widened ones on noisy clouds).
+    spacing = float(np.median(dist[:, 1]))
+    # Connectivity scale: the 6th neighbour's distance is about 1.5 spacings
+    # on grid-like sampling but 3 on random (Poisson) sampling.
+    reach = float(np.median(dist[:, min(6, dist.shape[1] - 1)]))
+
+    R, x, nrm, s2 = _standard_frame(x, nrm)
+    tree = cKDTree(x)
+    T = Similarity(center=center, R=R, scale=scale0 * s2)
+    diag = float(np.linalg.norm(np.ptp(x, axis=0)))
+    return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
+                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2)
+
+
+def _unit_cube(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """Barycentre to the origin, largest extent to 1.
+
+    Parameters
+    ----------
+    points : ndarray of float64, shape (n, 3)
+        World coordinates.
+
+    Returns
+    -------
+    center : ndarray, shape (3,)
+        The barycentre (world units).
+    scale : float
+        World → unit-cube factor (1 for a single repeated point).
+    x : ndarray, shape (n, 3)
+        ``(points - center) * scale``.
+    """
     center = points.mean(axis=0)
     x = points - center
     ext = np.ptp(x, axis=0).max()
     scale0 = 1.0 / ext if ext > 0 else 1.0
     x = x * scale0
+    return center, scale0, x
+
+
+@dataclass
+class _Neighbourhoods:
+    """The k-neighbourhoods of the unit-cube cloud and what they estimate (unit-cube units).
+
+    Attributes
+    ----------
+    tree : cKDTree
+        KD-tree on the points.
+    k : int
+        Neighbourhood size, at most the number of points.
+    dist, nbr : ndarray, shape (n, k)
+        Distances and indices of each point's k nearest points, the point itself first.
+    normals : ndarray, shape (n, 3)
+        Unit PCA normals of the neighbourhoods.
+    noise : float
+        Noise σ estimate (:func:`_noise_estimate`).
+    spacing : float
+        Median nearest-neighbour distance.
+    qres : ndarray, shape (n,), or None
+        Quadric residuals (:func:`quadric_residuals`), computed when k > 8.
+    """
+
+    tree: cKDTree
+    k: int
+    dist: np.ndarray
+    nbr: np.ndarray
+    normals: np.ndarray
+    noise: float
+    spacing: float
+    qres: np.ndarray | None
+
+
+def _neighbourhoods(x: np.ndarray, k: int) -> _Neighbourhoods:
+    """k-neighbourhoods of the (n, 3) unit-cube points ``x``, their PCA normals and the noise."""
     tree = cKDTree(x)
     k = int(min(k, len(x)))
     dist, nbr = tree.query(x, k=k)
     nrm, ev = pca_normals(x, nbr)
+    spacing = float(np.median(dist[:, 1]))
+    noise, qres = _noise_estimate(x, nbr, ev, k, spacing)
+    return _Neighbourhoods(tree=tree, k=k, dist=dist, nbr=nbr, normals=nrm, noise=noise, spacing=spacing,
+                           qres=qres)
+
+
+def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
+                    spacing: float) -> tuple[float, np.ndarray | None]:
+    """Robust noise σ of a cloud (its units) and the quadric residuals (n,) when k > 8, else None.
+
+    ``nbr`` (n, k) are the neighbourhoods, ``ev`` (n, 3) their covariance eigenvalues (ascending)
+    and ``spacing`` the median nearest-neighbour distance. The k-neighbour PCA residual is bounded
+    by smaller-neighbourhood estimates that sharp or thin clean features do not inflate.
+    """
     noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
     qres = None
     if k > 8:
@@ -283,7 +368,6 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         # cylinders, spheres, tori at 0.1-1% noise).
         qres = quadric_residuals(x, nbr)
         noise = min(noise, 1.15 * float(np.median(qres)))
-    spacing = float(np.median(dist[:, 1]))
     if k > 4:
         # A plate one or two spacings thick, or a sparse random sampling of
         # thin features, puts two surfaces in even 8 neighbours (Fit4CAD PC13,
@@ -297,43 +381,82 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         q25, q50 = np.quantile(r4, [0.25, 0.5])
         if q25 < 0.002 * spacing:
             noise = min(noise, 3.0 * float(q50))
-    # Connectivity scale: the 6th neighbour's distance is about 1.5 spacings
-    # on grid-like sampling but 3 on random (Poisson) sampling.
-    reach = float(np.median(dist[:, min(6, k - 1)]))
-    used = "pca"
+    return noise, qres
+
+
+def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | None, method: str, seed: int,
+                    noise_policy: str) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """The normals :func:`preprocess` keeps (see its ``method`` and ``noise``).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n, 3)
+        Unit-cube points.
+    hood : _Neighbourhoods
+        Their k-neighbourhoods.
+    normals : ndarray, shape (n, 3), or None
+        Given normals (world directions: rotations come later, the unit-cube scaling keeps them).
+
+    Returns
+    -------
+    normals : ndarray, shape (n, 3), unit
+    dist : ndarray, shape (n, k) or (n, 64)
+        Neighbour distances of the neighbourhoods used (widened ones for noisy clouds).
+    noise : float
+        Noise estimate, re-estimated on widened neighbourhoods.
+    method : str
+        ``"input"``, ``"pca"``, ``"pca-k64"`` (``"pca-k<n>"``) or ``"voting"``.
+    """
     if normals is not None and method in ("auto", "input"):
         nrm = np.asarray(normals, float)
         nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
-        used = "input"
-    elif method == "input":
+        return nrm, hood.dist, hood.noise, "input"
+    if method == "input":
         raise InputError("normals method 'input' needs normals in the input")
-    elif method not in ("auto", "pca", "voting"):
+    if method not in ("auto", "pca", "voting"):
         raise InputError(f"unknown normals method {method!r} (auto, pca, voting, input)")
-    else:
-        widen = noise_policy == "noisy" or (noise_policy == "auto" and noise > WIDE_NORMALS_SPACINGS * spacing)
-        if method != "pca" and widen and len(x) > k:
-            # Noisy cloud: a wider neighbourhood averages the noise out (at 1%
-            # of the diagonal, 64 neighbours give ~5° errors where 16 give 25°,
-            # measured on synthetic cylinders); the noise estimate improves too.
-            kk = int(min(64, len(x)))
-            dist, nbr = tree.query(x, k=kk)
-            nrm, ev = pca_normals(x, nbr)
-            noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
-            used = f"pca-k{kk}"
-        if method == "voting":
-            nrm = voting_normals(x, nbr, seed=seed)
-            used = "voting"
-        elif method == "auto" and used == "pca" and qres is not None:
-            # Clean cloud: PCA averages the two sides of a crease, and on a
-            # face two or three spacings wide (a groove wall, a chamfer) its
-            # neighbourhoods are mostly the neighbours' points. No local
-            # quadric explains a crease, while curvature alone it does.
-            crease = np.flatnonzero(qres > CREASE * spacing)
-            if len(crease):
-                nrm[crease] = voting_normals(x, nbr[crease], seed=seed, anchored=True)
-    spacing = float(np.median(dist[:, 1]))
-    reach = float(np.median(dist[:, min(6, dist.shape[1] - 1)]))
+    nrm, nbr, dist, noise, used = hood.normals, hood.nbr, hood.dist, hood.noise, "pca"
+    widen = noise_policy == "noisy" or (noise_policy == "auto" and noise > WIDE_NORMALS_SPACINGS * hood.spacing)
+    if method != "pca" and widen and len(x) > hood.k:
+        # Noisy cloud: a wider neighbourhood averages the noise out (at 1%
+        # of the diagonal, 64 neighbours give ~5° errors where 16 give 25°,
+        # measured on synthetic cylinders); the noise estimate improves too.
+        kk = int(min(64, len(x)))
+        dist, nbr = hood.tree.query(x, k=kk)
+        nrm, ev = pca_normals(x, nbr)
+        noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
+        used = f"pca-k{kk}"
+    if method == "voting":
+        nrm = voting_normals(x, nbr, seed=seed)
+        used = "voting"
+    elif method == "auto" and used == "pca" and hood.qres is not None:
+        # Clean cloud: PCA averages the two sides of a crease, and on a
+        # face two or three spacings wide (a groove wall, a chamfer) its
+        # neighbourhoods are mostly the neighbours' points. No local
+        # quadric explains a crease, while curvature alone it does.
+        crease = np.flatnonzero(hood.qres > CREASE * hood.spacing)
+        if len(crease):
+            nrm[crease] = voting_normals(x, nbr[crease], seed=seed, anchored=True)
+    return nrm, dist, noise, used
 
+
+def _standard_frame(x: np.ndarray, nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Most voted normal direction to z (the second one fixes x), then back into the unit cube.
+
+    Parameters
+    ----------
+    x, nrm : ndarray, shape (n, 3)
+        Unit-cube points and their unit normals.
+
+    Returns
+    -------
+    R : ndarray, shape (3, 3)
+        The rotation (rows: new axes).
+    x, nrm : ndarray, shape (n, 3)
+        Rotated and rescaled points, rotated normals.
+    scale : float
+        The rescaling factor (the rotation changes the extents).
+    """
     acc = direction_accumulator()
     H = acc.smooth(acc.vote(nrm))
     dirs, _ = acc.peaks(H, min_persistence=0.05, max_peaks=2)
@@ -347,8 +470,4 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     ext2 = np.ptp(x, axis=0).max()
     s2 = 1.0 / ext2 if ext2 > 0 else 1.0
     x *= s2
-    tree = cKDTree(x)
-    T = Similarity(center=center, R=R, scale=scale0 * s2)
-    diag = float(np.linalg.norm(np.ptp(x, axis=0)))
-    return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
-                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2)
+    return R, x, nrm, s2

@@ -7,11 +7,16 @@ subsampled deterministically (the same points every run) for drawing speed.
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from .palette import UNSEGMENTED_COLOR, hex_color, point_colors, type_color, types_present
 from .result import Result
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = ["render_png", "draw_sample", "principal_frame", "splat", "MAX_DRAWN_POINTS"]
 
@@ -128,7 +133,6 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
     # A bare Figure (no pyplot) prints through the Agg canvas: headless, and the
     # caller's pyplot backend and global state are left alone.
     from matplotlib.figure import Figure
-    from matplotlib.patches import Patch
 
     from .io.writers import atomic_write
 
@@ -149,30 +153,13 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
     # Each view is splatted into an image with numpy (a z-buffer, nearest point wins)
     # and shown with imshow: ten times faster than matplotlib's scatter and 3-D axes.
     panel = int(round(3.4 * dpi))  # pixels per side, about the size of one axes
-    iso = _iso_basis()
-    # Depth = right x up: a view as from outside, never mirrored.
-    views = [(name, np.array([np.eye(3)[a], np.eye(3)[b], np.cross(np.eye(3)[a], np.eye(3)[b])]),
-              f"u{a + 1}", f"u{b + 1}", half_ortho) for name, a, b, _ in _ORTHO_VIEWS]
-    views.append(("isometric", iso, None, None, half_iso))
+    views = _views(half_ortho, half_iso)
     radius = 1 if len(P) > 6000 else 2
     for row, by in enumerate(("type", "segment")):
-        for col, (name, basis, xl, yl, half) in enumerate(views):
+        for col, view in enumerate(views):
             ax = fig.add_subplot(2, 4, 4 * row + col + 1)
-            Q = (P - centre) @ basis.T  # (horizontal, vertical, towards the viewer)
-            img = splat(Q[:, 0], Q[:, 1], Q[:, 2], colours[by], half, panel, radius)
-            ax.imshow(img, extent=(-half, half, -half, half), interpolation="nearest", origin="upper")
-            ax.set_title(f"{name}, by {by}", fontsize=9)
-            if xl is None:  # the isometric view has no meaningful axis values
-                ax.set_axis_off()
-            else:
-                ax.set_xlabel(xl, fontsize=7, labelpad=1)
-                ax.set_ylabel(yl, fontsize=7, labelpad=1)
-                ax.tick_params(labelsize=7)
-
-    handles = [Patch(color=hex_color(type_color(t)),
-                     label=f"{t} ({sum(s.type == t for s in result.segments)})") for t in types_present(result)]
-    handles.append(Patch(color=hex_color(UNSEGMENTED_COLOR), label=f"unsegmented ({len(result.unsegmented)} pts)"))
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=9, frameon=False)
+            _draw_view(ax, (P - centre) @ view.basis.T, colours[by], view, by, panel, radius)
+    _legend(fig, result)
     if title is None:
         src = os.path.basename(result.source) if result.source else "point cloud"
         shown = "" if len(sel) == len(pts) else f", {len(sel)} drawn"
@@ -182,3 +169,55 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
     fig.subplots_adjust(left=0.03, right=0.99, top=0.92, bottom=0.09, wspace=0.18, hspace=0.22)
     with atomic_write(path, "wb") as f:
         fig.savefig(f, format="png", dpi=dpi)
+
+
+class _View(NamedTuple):
+    """One of the four views of :func:`render_png`."""
+
+    name: str
+    basis: np.ndarray  # (3, 3), rows: screen right, screen up, towards the viewer
+    xlabel: str | None  # axis labels; None for the isometric view (no meaningful values)
+    ylabel: str | None
+    half: float  # half the side of the view, the cloud's units
+
+
+def _views(half_ortho: float, half_iso: float) -> list[_View]:
+    """The three orthographic views of :data:`_ORTHO_VIEWS` and the isometric one.
+
+    ``half_ortho`` and ``half_iso`` are the half sides of the views, in the cloud's units.
+    """
+    iso = _iso_basis()
+    # Depth = right x up: a view as from outside, never mirrored.
+    views = [_View(name, np.array([np.eye(3)[a], np.eye(3)[b], np.cross(np.eye(3)[a], np.eye(3)[b])]),
+                   f"u{a + 1}", f"u{b + 1}", half_ortho) for name, a, b, _ in _ORTHO_VIEWS]
+    views.append(_View("isometric", iso, None, None, half_iso))
+    return views
+
+
+def _draw_view(ax: Axes, Q: np.ndarray, colors: np.ndarray, view: _View, by: str, panel: int, radius: int) -> None:
+    """Splat one view into ``ax``.
+
+    ``Q`` (N, 3) are the drawn points in the view's basis (horizontal, vertical, towards the
+    viewer), ``colors`` (N, 3) uint8, ``panel`` the image side in pixels, ``radius`` the splat
+    radius in pixels.
+    """
+    name, _, xl, yl, half = view
+    img = splat(Q[:, 0], Q[:, 1], Q[:, 2], colors, half, panel, radius)
+    ax.imshow(img, extent=(-half, half, -half, half), interpolation="nearest", origin="upper")
+    ax.set_title(f"{name}, by {by}", fontsize=9)
+    if xl is None:  # the isometric view has no meaningful axis values
+        ax.set_axis_off()
+    else:
+        ax.set_xlabel(xl, fontsize=7, labelpad=1)
+        ax.set_ylabel(yl, fontsize=7, labelpad=1)
+        ax.tick_params(labelsize=7)
+
+
+def _legend(fig: Figure, result: Result) -> None:
+    """Legend of the figure: the types present (with their segment counts) and the unsegmented points."""
+    from matplotlib.patches import Patch
+
+    handles = [Patch(color=hex_color(type_color(t)),
+                     label=f"{t} ({sum(s.type == t for s in result.segments)})") for t in types_present(result)]
+    handles.append(Patch(color=hex_color(UNSEGMENTED_COLOR), label=f"unsegmented ({len(result.unsegmented)} pts)"))
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=9, frameon=False)

@@ -1,4 +1,9 @@
-"""Reading point clouds and writing results (see :mod:`.readers`, :mod:`.writers`)."""
+"""Reading point clouds and writing results.
+
+:mod:`.readers` detects the format and validates; one module per family of formats parses
+(:mod:`.ply`, :mod:`.text`, :mod:`.mesh`, :mod:`.npy`, helpers in :mod:`.common`);
+:mod:`.writers` writes.
+"""
 
 from __future__ import annotations
 

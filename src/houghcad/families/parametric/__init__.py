@@ -84,13 +84,11 @@ def _range(r, what: str):
     return lo, hi
 
 
-def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
-                  linear: Sequence[str] | None = None,
+def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *, linear: Sequence[str] | None = None,
                   bounds: Mapping[str, tuple[float, float]] | None = None,
-                  lengths: Sequence[str] | Mapping[str, float] | None = None,
-                  placement: str | Callable = "axis", samples: tuple[int, int] | None = None,
-                  valid: Callable[[dict], bool] | None = None, search: str = "whole",
-                  precedence: int = 10, register: bool = True) -> ParametricFamily:
+                  lengths: Sequence[str] | Mapping[str, float] | None = None, placement: str | Callable = "axis",
+                  samples: tuple[int, int] | None = None, valid: Callable[[dict], bool] | None = None,
+                  search: str = "whole", precedence: int = 10, register: bool = True) -> ParametricFamily:
     """Declare a parametric family x(u, v; a), y(u, v; a), z(u, v; a).
 
     Parameters
@@ -152,6 +150,25 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
     -------
     ParametricFamily
     """
+    # The checks run in this order (the first failing one is reported).
+    names = _checked_names(name, params)
+    ur, vr = _range(u_range, "u_range"), _range(v_range, "v_range")
+    eq, solved = _compile(name, (x, y, z), names, ur, vr, linear)
+    dims, bnds = _length_powers(name, lengths, names), _vote_bounds(name, bounds, names)
+    samples = _checked_vote_setup(name, placement, samples, solved)
+    fam = ParametricFamily(name, eq, names, dims, ur, vr, solved, bnds, placement, samples, valid)
+    _set_search(fam, search, precedence)
+    if register:
+        add(fam)
+        _USER.add(name)
+    return fam
+
+
+# --------------------------------------------------------------------------- define_family's steps
+
+
+def _checked_names(name: str, params: Sequence) -> list[str]:
+    """The parameters' names, after checking the family's name and theirs (1 to 3, distinct, not u, v)."""
     if not isinstance(name, str) or not _NAME.match(name):
         raise InputError(f"family name must match [a-z][a-z0-9_]*, got {name!r}")
     if name in SELECTION_WORDS or (name in REGISTRY and name not in _USER):
@@ -161,63 +178,97 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
         raise InputError(f"{name}: a family has one to three parameters (the voted unknowns), got {len(names)}")
     if len(set(names)) != len(names) or {"u", "v"} & set(names):
         raise InputError(f"{name}: parameter names must be distinct and not u or v, got {names}")
-    ur, vr = _range(u_range, "u_range"), _range(v_range, "v_range")
+    return names
+
+
+def _compile(name: str, funcs: tuple, names: list[str], ur: tuple[float, float] | None,
+             vr: tuple[float, float] | None, linear: Sequence[str] | None) -> tuple[Equations, list[int]]:
+    """The equations and the indices of the solved (linear, jointly solvable) parameters.
+
+    ``funcs`` are the x, y, z equations as given, ``ur`` and ``vr`` the checked (u, v) ranges
+    (None: a free length, probed over (-1, 1)), ``linear`` the declared linear parameters.
+    """
+    # One seeded generator for both numerical probes: the same family compiles the same way.
     rng = np.random.default_rng(0)
     spans = [(-1.0, 1.0) if r is None else r for r in (ur, vr)]
+    eq, detected = _equations(name, funcs, names, spans, rng)
+    if linear is not None:
+        detected = _declared_linear(name, linear, names, detected)
+    solved = solvable_subset(eq, detected, *spans, rng) if detected else []
+    return eq, solved
 
-    funcs = (x, y, z)
+
+def _equations(name: str, funcs: tuple, names: list[str], spans: list[tuple[float, float]],
+               rng: np.random.Generator) -> tuple[Equations, list[int]]:
+    """Callable or sympy equations, and the indices of the parameters they are linear in."""
+    x, y, z = funcs
     if all(callable(f) for f in funcs) and not any(hasattr(f, "free_symbols") for f in funcs):
         eq: Equations = CallableEquations(x, y, z, names)
         try:
             detected = linear_params_numeric(eq, *spans, rng)
         except Exception as exc:
             raise InputError(f"{name}: evaluating the callables failed ({type(exc).__name__}: {exc})") from None
-    else:
-        import sympy as sp
+        return eq, detected
+    import sympy as sp
 
-        syms = [sp.Symbol(n) for n in names]
-        su, sv = sp.Symbol("u"), sp.Symbol("v")
-        try:
-            exprs = [sp.sympify(f) for f in funcs]
-        except (sp.SympifyError, TypeError) as exc:
-            raise InputError(f"{name}: cannot read the equations ({exc})") from None
-        # Parameters may have been created with assumptions: match by name.
-        exprs = [e.subs({s: sp.Symbol(s.name) for s in e.free_symbols}) for e in exprs]
-        extra = set().union(*(e.free_symbols for e in exprs)) - {su, sv, *syms}
-        if extra:
-            raise InputError(f"{name}: unknown symbols {sorted(map(str, extra))} in the equations "
-                             f"(coordinates are u and v; parameters {names})")
-        eq = SympyEquations(exprs, su, sv, syms)
-        detected = linear_params_sympy(exprs, syms)
-    if linear is not None:
-        declared = [names.index(str(p)) if str(p) in names else -1 for p in linear]
-        if -1 in declared:
-            raise InputError(f"{name}: linear names unknown parameters {list(linear)} (parameters {names})")
-        wrong = [names[i] for i in declared if i not in detected]
-        if wrong:
-            raise InputError(f"{name}: parameters {wrong} are declared linear but the equations are not linear in them")
-        detected = [i for i in detected if i in declared]
-    solved = solvable_subset(eq, detected, *spans, rng) if detected else []
+    syms = [sp.Symbol(n) for n in names]
+    su, sv = sp.Symbol("u"), sp.Symbol("v")
+    try:
+        exprs = [sp.sympify(f) for f in funcs]
+    except (sp.SympifyError, TypeError) as exc:
+        raise InputError(f"{name}: cannot read the equations ({exc})") from None
+    # Parameters may have been created with assumptions: match by name.
+    exprs = [e.subs({s: sp.Symbol(s.name) for s in e.free_symbols}) for e in exprs]
+    extra = set().union(*(e.free_symbols for e in exprs)) - {su, sv, *syms}
+    if extra:
+        raise InputError(f"{name}: unknown symbols {sorted(map(str, extra))} in the equations "
+                         f"(coordinates are u and v; parameters {names})")
+    return SympyEquations(exprs, su, sv, syms), linear_params_sympy(exprs, syms)
 
+
+def _declared_linear(name: str, linear: Sequence[str], names: list[str], detected: list[int]) -> list[int]:
+    """The detected linear parameters restricted to the declared ones (each must be detected)."""
+    declared = [names.index(str(p)) if str(p) in names else -1 for p in linear]
+    if -1 in declared:
+        raise InputError(f"{name}: linear names unknown parameters {list(linear)} (parameters {names})")
+    wrong = [names[i] for i in declared if i not in detected]
+    if wrong:
+        raise InputError(f"{name}: parameters {wrong} are declared linear but the equations are not linear in them")
+    return [i for i in detected if i in declared]
+
+
+def _length_powers(name: str, lengths: Sequence[str] | Mapping[str, float] | None,
+                   names: list[str]) -> list[float]:
+    """Each parameter's power of length (see ``lengths`` in :func:`define_family`)."""
     if lengths is None:
-        dims = [1.0] * len(names)
-    elif isinstance(lengths, Mapping):
+        return [1.0] * len(names)
+    if isinstance(lengths, Mapping):
         unknown = set(map(str, lengths)) - set(names)
         if unknown:
             raise InputError(f"{name}: lengths names unknown parameters {sorted(unknown)}")
         powers = {str(s): float(d) for s, d in lengths.items()}
-        dims = [powers.get(n, 0.0) for n in names]
-    else:
-        listed = {str(s) for s in lengths}
-        if listed - set(names):
-            raise InputError(f"{name}: lengths names unknown parameters {sorted(listed - set(names))}")
-        dims = [1.0 if n in listed else 0.0 for n in names]
+        return [powers.get(n, 0.0) for n in names]
+    listed = {str(s) for s in lengths}
+    if listed - set(names):
+        raise InputError(f"{name}: lengths names unknown parameters {sorted(listed - set(names))}")
+    return [1.0 if n in listed else 0.0 for n in names]
+
+
+def _vote_bounds(name: str, bounds: Mapping[str, tuple[float, float]] | None,
+                 names: list[str]) -> list[tuple[float, float]]:
+    """Each parameter's voted range, multiples of the segment's size to its power (default (-2, 2))."""
     bnds = []
     bounds = {str(k): v for k, v in (bounds or {}).items()}
     if set(bounds) - set(names):
         raise InputError(f"{name}: bounds name unknown parameters {sorted(set(bounds) - set(names))}")
     for n in names:
         bnds.append(_range(bounds.get(n, (-2.0, 2.0)), f"bounds[{n!r}]"))
+    return bnds
+
+
+def _checked_vote_setup(name: str, placement: str | Callable, samples: tuple[int, int] | None,
+                        solved: list[int]) -> tuple[int, int] | None:
+    """``samples`` as ints, after checking the placement and that some parameter is solved."""
     if not callable(placement) and placement not in PLACEMENTS:
         raise InputError(f"{name}: unknown placement {placement!r} (known: {', '.join(PLACEMENTS)}, or a callable)")
     if samples is not None:
@@ -225,15 +276,15 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *,
     if not solved:
         raise InputError(f"{name}: no parameter enters the equations linearly (or none is solvable): the Hough "
                          "transform is sampled by solving for linear parameters")
-    fam = ParametricFamily(name, eq, names, dims, ur, vr, solved, bnds, placement, samples, valid)
+    return samples
+
+
+def _set_search(fam: ParametricFamily, search: str, precedence: int) -> None:
+    """Set the family's search mode (checked) and tie rank."""
     if search not in SEARCHES:
-        raise InputError(f"{name}: search must be one of {SEARCHES}, got {search!r}")
+        raise InputError(f"{fam.name}: search must be one of {SEARCHES}, got {search!r}")
     fam.search = search
     fam.precedence = int(precedence)
-    if register:
-        add(fam)
-        _USER.add(name)
-    return fam
 
 
 def unregister_family(name: str) -> None:

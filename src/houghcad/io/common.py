@@ -1,0 +1,51 @@
+"""What the format readers of :mod:`houghcad.io` share: the reader signature and text helpers.
+
+A reader is ``read(data, source) -> (points, normals)``: ``data`` the file's bytes, ``source``
+its name for error messages, ``points`` (N, 3) float64 in the file's units and ``normals``
+(N, 3) or None. Validation (finite, count, degeneracy) happens afterwards in
+:func:`houghcad.io.readers.validate_points`, so readers only parse.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..errors import InputError
+
+#: (points (N, 3) float64, normals (N, 3) or None) as a reader returns them.
+Parsed = tuple[np.ndarray, "np.ndarray | None"]
+
+#: ``read(data, source) -> Parsed``.
+Reader = Callable[[bytes, str], Parsed]
+
+#: Bytes of a file's start that format detection looks at.
+SNIFF_BYTES = 4096
+
+
+def decode_text(data: bytes, source: str) -> str:
+    """Bytes to str for the text formats; binary content is an InputError."""
+    if b"\0" in data[:SNIFF_BYTES]:
+        raise InputError(f"{source}: not a text file (binary content)")
+    return data.decode("utf-8-sig", errors="replace")
+
+
+def is_float(token: str) -> bool:
+    """True when ``float(token)`` succeeds."""
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def text_start(head: bytes) -> bytes:
+    """``head`` without a UTF-8 byte-order mark and leading whitespace."""
+    return head.lstrip(b"\xef\xbb\xbf").lstrip()
+
+
+def first_word(head: bytes) -> str:
+    """First whitespace-separated word of a file's start (ascii, "" when there is none)."""
+    start = text_start(head)
+    return start.split(None, 1)[0].decode("ascii", "replace") if start else ""
