@@ -7,9 +7,9 @@ Fit4CAD files (see ``shared/fit4cad/README.md``):
 
 Block correspondence: the k-th block of ``_primitives.txt`` describes the same surface as the k-th
 block of ``_parametric.txt`` (by position, not by the number K). Checked on all 188 training
-clouds: in PC83 the primitives blocks are numbered 1-4, 7-23 while the parametric ones are 1-21,
-and only the positional pairing puts the points on the decoded surfaces. ``_implicit.txt`` omits
-the blocks of B-spline surfaces (PC117, PC144), so it is *not* aligned with the other two there;
+clouds: in one of them the primitives blocks are numbered 1-4, 7-23 while the parametric ones are
+1-21, and only the positional pairing puts the points on the decoded surfaces. ``_implicit.txt``
+omits the blocks of B-spline surfaces (two clouds have some), so it is *not* aligned there;
 use ``_parametric.txt`` for types.
 """
 
@@ -123,7 +123,7 @@ def read_fit4cad_types(path: str | Path) -> list[str]:
     -------
     list of str
         ``"plane"``, ``"cylinder"``, ``"cone"``, ``"sphere"``, ``"torus"`` (and ``"bspline"``,
-        which the parametric files of PC117 and PC144 contain), blocks sorted by K. Read the
+        which two parametric files of the training set contain), blocks sorted by K. Read the
         ``_parametric.txt`` file to get one entry per ground-truth segment: implicit files omit
         B-spline blocks.
     """
@@ -191,10 +191,10 @@ def read_fit4cad_parameters(path_parametric: str | Path) -> list[dict[str, Any]]
 
     Confirmed on all 188 training clouds (2669 analytic blocks) by measuring the distance of each
     ground-truth segment's points to the decoded surface: the 95th percentile is below 1e-3 of
-    the cloud's bounding-box diagonal for every block except two PC66 cylinders whose axis point
+    the cloud's bounding-box diagonal for every block except two cylinders whose axis point
     lies 5e5 units away (the file's 6 significant digits tilt the axis). Also confirmed: column
     norms as stated (``|r u| = |r v|``, ``|a| = 1``, ``s^2 + c^2 = 1``), and every cone's ground-truth
-    points lie on the ``+a`` side of the decoded apex. PC1's torus block is written
+    points lie on the ``+a`` side of the decoded apex. A torus block may be written
     ``[Torus, [Torus, [...]]``; the repeated type word is ignored.
 
     Returns

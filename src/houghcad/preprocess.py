@@ -370,8 +370,8 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
         noise = min(noise, 1.15 * float(np.median(qres)))
     if k > 4:
         # A plate one or two spacings thick, or a sparse random sampling of
-        # thin features, puts two surfaces in even 8 neighbours (Fit4CAD PC13,
-        # PC113 read 0.5 and 2 spacings of noise). A point and its 3 nearest
+        # thin features, puts two surfaces in even 8 neighbours (exact CAD
+        # samples read up to 2 spacings of noise so). A point and its 3 nearest
         # neighbours rarely straddle them: on exact samples a quarter or more
         # of these quadruples are coplanar to rounding, which noise does not
         # give (their 25th percentile is above 0.01 spacing from sigma = 0.07
