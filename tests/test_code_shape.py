@@ -59,3 +59,12 @@ def test_no_unnamed_threshold_in_the_pipeline_modules(name):
     v = _Literals()
     v.visit(ast.parse((SRC / f"{name}.py").read_text()))
     assert not v.found, f"{name}.py: unnamed numbers at lines {v.found}"
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(SRC)))
+def test_no_comment_names_a_benchmark_cloud(path):
+    # Comments explain the geometry; a cloud's name in the code is a rule fitted to one file.
+    import re
+
+    names = [m.group(0) for m in re.finditer(r"\bPC\d+\b(?!_primitives)", path.read_text())]
+    assert not names
