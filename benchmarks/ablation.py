@@ -66,6 +66,18 @@ NOT_ON_FIT4CAD_FIELDS = {
 }
 
 
+#: Special cases inside the passes, switched off by a tolerance that can no longer be met.
+SPECIAL_CASES: tuple[tuple[str, dict[str, float], bool], ...] = (
+    ("coaxial_bands", {"splitting.coaxial_cover": 1.01}, True),   # cylinders about the neighbours' axes
+    ("ransac_fallback", {"splitting.ransac_min_size": 1e9}, True),  # CGAL's RANSAC on unplaced clusters
+    ("strip_rows", {"recognition.strip_min_points": 10 ** 9}, True),  # one-row strips of narrow faces
+    ("slice_gate", {"recognition.slice_sigmas": 1e9, "recognition.slice_taus": 1e9}, True),  # tangent slices
+    ("clean_trimming", {"recognition.clean_trim_rounds": 0}, True),  # refits on the closer half
+    ("beside_top", {"recognition.beside_top_peaks": 0}, False),  # stacked surfaces' lower peaks
+    ("fillet_alignment", {"fillets.aligned_max_deg": 0.5}, False),  # short cylinders snapped to a plane's normal
+)
+
+
 @dataclass(frozen=True)
 class Variant:
     """One configuration: passes skipped and tolerances changed."""
@@ -82,6 +94,8 @@ def variants() -> list[Variant]:
 
     out = [Variant("baseline")]
     out += [Variant(f"skip-{p}", skip=(p,), on_fit4cad=p not in NOT_ON_FIT4CAD_PASSES) for p in EXTENSION_PASSES]
+    out += [Variant(f"off-{name}", tolerances=tuple(tol.items()), on_fit4cad=active)
+            for name, tol, active in SPECIAL_CASES]
     t = Tolerances()
     for stage in fields(t):
         group = getattr(t, stage.name)

@@ -303,6 +303,11 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
     s["seconds_median"] = float(np.median(t)) if t.size else math.nan
     s["seconds_max"] = float(t.max()) if t.size else math.nan
     s["seconds_total"] = float(t.sum())
+    # The 5 fixed folds (clouds by number mod 5): a change motivated by some
+    # clouds must raise the mean of the folds they are not in.
+    for k in range(FOLDS):
+        v = [r["DSC"] for r in rows if _fold(r["name"]) == k]
+        s[f"DSC_fold{k}"] = float(np.mean(v)) if v else math.nan
     mem = [r["peak_mb"] for r in rows if r["peak_mb"] is not None]
     s["peak_mb_max"] = float(max(mem)) if mem else math.nan
     pairs = [(r["DSC"], r["DSC_nomerge"]) for r in ok if r.get("DSC_nomerge") is not None]
@@ -314,6 +319,20 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         s["merge_raised"] = int((a > b + 1e-9).sum())
         s["merge_worst"] = float((a - b).min())
     return s
+
+
+FOLDS = 5
+
+
+def _fold(name: str) -> int:
+    """The fixed fold of a cloud: its number mod 5 (-1 when the name has none)."""
+    digits = re.sub(r"\D", "", name)
+    return int(digits) % FOLDS if digits else -1
+
+
+def _folds_line(s: dict[str, Any]) -> str:
+    return "DSC per fold (cloud number mod 5): " + ", ".join(
+        f"{k}: {_fmt(s.get(f'DSC_fold{k}'))}" for k in range(FOLDS))
 
 
 def _fmt(v: Any, digits: int = 3) -> str:
@@ -329,6 +348,7 @@ def summary_text(s: dict[str, Any]) -> str:
     lines = [
         f"clouds: {s['n_clouds']}  failures: {s['n_failed']}",
         f"DSC mean {_fmt(s['DSC_mean'])}  median {_fmt(s['DSC_median'])}",
+        _folds_line(s),
         "means: " + "  ".join(f"{m} {_fmt(s[f'{m}_mean'])}" for m in MEASURES),
         (
             f"time (s, successful clouds): mean {_fmt(s['seconds_mean'], 2)}  median "
@@ -386,6 +406,9 @@ def section_markdown(
     w("| measure | mean | median |\n|---|---|---|\n")
     for m in MEASURES:
         w(f"| {m} | {_fmt(s[f'{m}_mean'])} | {_fmt(s[f'{m}_median'])} |\n")
+    w("\n| fold (cloud number mod 5) | " + " | ".join(str(k) for k in range(FOLDS)) + " |\n")
+    w("|---" * (FOLDS + 1) + "|\n")
+    w("| mean DSC | " + " | ".join(_fmt(s.get(f"DSC_fold{k}"), 4) for k in range(FOLDS)) + " |\n")
     w("\n| resource | mean | median | max |\n|---|---|---|---|\n")
     w(f"| time per cloud (s, segment call, successful clouds) | {_fmt(s['seconds_mean'], 2)} | "
       f"{_fmt(s['seconds_median'], 2)} | {_fmt(s['seconds_max'], 2)} |\n")
