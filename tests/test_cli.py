@@ -257,12 +257,22 @@ def test_bad_families_from_pipeline_is_exit_2(tmp_path, capsys, fake_pipeline):
     assert not (tmp_path / "r.json").exists()
 
 
-def test_keyboard_interrupt_is_quiet_130(tmp_path, capsys, fake_pipeline):
+def test_keyboard_interrupt_says_one_line_and_exits_130(tmp_path, capsys, fake_pipeline):
     inp = _write_xyz(tmp_path / "part.xyz", _blob())
     fake_pipeline.behaviour = KeyboardInterrupt()
     assert main(["segment", str(inp), "-o", str(tmp_path / "r.json")]) == 130
-    assert capsys.readouterr().err == ""
+    assert capsys.readouterr().err == "houghcad: interrupted\n"
     assert not (tmp_path / "r.json").exists()
+
+
+def test_a_closed_pipe_ends_quietly_with_the_outputs_written(tmp_path):
+    inp = _write_xyz(tmp_path / "part.xyz", _parts_cloud())
+    out = tmp_path / "r.json"
+    # `houghcad segment ... | head -c 1`: the reader goes away after one byte.
+    cmd = f"{sys.executable} -m houghcad segment {inp} -o {out} | head -c 1"
+    done = subprocess.run(["bash", "-o", "pipefail", "-c", cmd], capture_output=True, text=True, timeout=300)
+    assert done.stderr == "" and done.returncode == 0
+    assert json.loads(out.read_text())["n_points"] == len(_parts_cloud())
 
 
 def test_segment_with_stub_writes_outputs(tmp_path, capsys, monkeypatch, fake_pipeline):

@@ -271,6 +271,18 @@ def test_evaluate_files_rejects_bad_results(tmp_path: Path):
         evaluate_files(_result_json(tmp_path, [_arr(0)], 2), gt)
 
 
+def test_evaluate_files_refuses_a_result_of_another_cloud(tmp_path: Path):
+    # The cloud beside the ground truth has 30 points; a result of 100 points is not of this cloud.
+    (tmp_path / "PC7_primitives.txt").write_text("Primitive1:=[1 2 3];\n")
+    pts = np.random.default_rng(0).normal(size=(30, 3))
+    (tmp_path / "PC7.txt").write_text("Points:=[\n" + "".join(f"[{x}, {y}, {z}],\n" for x, y, z in pts) + "];\n")
+    rj = _result_json(tmp_path, [_arr(0, 1, 2)], 100)
+    for given in ("PC7_primitives.txt", "PC7.txt"):
+        with pytest.raises(InputError, match="has 100 points but the cloud PC7.txt has 30"):
+            evaluate_files(rj, tmp_path / given)
+    assert evaluate_files(_result_json(tmp_path, [_arr(0, 1, 2)], 30), tmp_path / "PC7.txt")["measures"]["DSC"] == 1.0
+
+
 # --------------------------------------------------------------------------- real Fit4CAD files
 
 

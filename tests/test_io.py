@@ -463,11 +463,13 @@ def test_collinear(tmp_path):
     _assert_error(path, e, "all points are collinear")
 
 
-def test_identical_points(tmp_path):
-    path = _table(tmp_path / "same.xyz", np.tile([1.0, 2.0, 3.0], (30, 1)))
+@pytest.mark.parametrize("point", [[1.0, 2.0, 3.0], [0.1, 0.2, 0.3]])
+def test_identical_points(tmp_path, point):
+    # 50 copies of (0.1, 0.2, 0.3): their mean's rounding once read as collinear.
+    path = _table(tmp_path / "same.xyz", np.tile(point, (50, 1)))
     with pytest.raises(InputError) as e:
         read_points(path)
-    _assert_error(path, e, "identical")
+    _assert_error(path, e, "all points are identical")
 
 
 def test_missing_file(tmp_path):

@@ -427,3 +427,24 @@ def test_a_family_refining_a_selected_one_is_not_voted(monkeypatch):
     houghcad.segment(cloud.points, families="plane,annulus", seed=0)
     with pytest.raises(AssertionError, match="annulus voted"):
         houghcad.segment(cloud.points, families="annulus", seed=0)
+
+
+def test_results_hold_plain_python_numbers(small_part):
+    res = houghcad.segment(small_part.points, families="plane,cylinder")
+
+    def check(x):
+        if isinstance(x, dict):
+            for v in x.values():
+                check(v)
+        elif isinstance(x, list):
+            for v in x:
+                check(v)
+        else:
+            assert type(x) in (int, float, str, bool, type(None)), type(x)
+
+    for s in res.segments:
+        check(s.params)
+        check(s.descriptors)
+        for p in s.parts:
+            check(p.params)
+    assert any(s.type == "cylinder" and type(s.params["radius"]) is float for s in res.segments)

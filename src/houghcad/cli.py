@@ -463,7 +463,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         _error(str(exc))
         return 2
     except KeyboardInterrupt:
+        # Outputs are written whole or not at all: nothing partial is left.
+        print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader of our output went away (`houghcad segment ... | head`):
+        # the results are written already; stop quietly. Python would print
+        # the error again when it flushes stdout at exit, so point it elsewhere.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

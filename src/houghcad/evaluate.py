@@ -24,6 +24,7 @@ from .groundtruth import (
     read_text,
     unit,
 )
+from .io import read_points
 from .result import Result
 
 __all__ = [
@@ -284,6 +285,8 @@ def parameter_errors(family: str, truth: dict, found: dict, diagonal: float,
 
 #: Point-cloud file extensions :func:`ground_truth_for` strips (those of ``houghcad.io.readers``).
 _CLOUD_EXTENSIONS = (".ply", ".xyz", ".txt", ".csv", ".pts", ".asc", ".npy", ".obj", ".off", ".stl")
+#: Files beside a cloud that are its ground truth, not the cloud.
+_GT_SUFFIXES = ("_primitives.txt", "_implicit.txt", "_parametric.txt")
 
 
 def ground_truth_for(path: str | Path) -> Path:
@@ -310,6 +313,15 @@ def ground_truth_for(path: str | Path) -> Path:
     if not cand.is_file():
         raise InputError(f"{path}: ground truth {cand.name} not found")
     return cand
+
+
+def _cloud_beside(given: Path, gt_file: Path) -> Path | None:
+    """The point cloud the ground truth belongs to: ``given`` when it is a cloud
+    file, else ``NAME.<ext>`` beside ``NAME_primitives.txt``; None when there is none."""
+    stem = gt_file.name[: -len("_primitives.txt")]
+    names = [given] if given.is_file() and not given.name.endswith(_GT_SUFFIXES) else []
+    names += [gt_file.with_name(stem + ext) for ext in _CLOUD_EXTENSIONS]
+    return next((p for p in names if p.is_file()), None)
 
 
 def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path) -> dict[str, Any]:
@@ -351,6 +363,12 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path) 
     gt_file = ground_truth_for(ground_truth_path)
     gt = read_fit4cad_segments(gt_file)
     n = result.n_points
+    cloud = _cloud_beside(Path(ground_truth_path), gt_file)
+    if cloud is not None:
+        m = len(read_points(cloud).points)
+        if m != n:
+            raise InputError(f"{rpath}: the result has {n} points but the cloud {cloud.name} has {m}: "
+                             "not a result of this cloud")
     gt_max = max((int(g.max()) for g in gt if g.size), default=-1)
     if gt_max >= n:
         raise InputError(

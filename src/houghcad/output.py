@@ -43,7 +43,7 @@ def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed,
         if prim is None or not fam.valid(prim, check):
             prim = prim0
         mfe = mean_fitting_error(fam.distance(prim, P) / T.scale, points[idx])
-        return fam.to_world(prim, T), mfe
+        return plain(fam.to_world(prim, T)), mfe
 
     out: list[Segment] = []
     for k in order:
@@ -80,8 +80,20 @@ def world_descriptors(fam: Family, d: dict[str, Any], T: Similarity) -> dict[str
             out[k] = T.inv_dirs(np.asarray(v, float)).tolist()
         elif k in ("axis_point", "mirror_point"):
             out[k] = T.inv_points(np.asarray(v, float)).tolist()
-        elif isinstance(v, (np.floating, np.integer)):
-            out[k] = v.item()
         else:
             out[k] = v
-    return out
+    return plain(out)
+
+
+def plain(x: Any) -> Any:
+    """``x`` with numpy scalars and arrays, at any depth, as Python numbers and lists:
+    results hold plain values, whatever a family's ``to_world`` returns."""
+    if isinstance(x, dict):
+        return {k: plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return plain(x.tolist())
+    if isinstance(x, np.generic):
+        return x.item()
+    return x

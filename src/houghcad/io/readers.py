@@ -315,6 +315,10 @@ def _degeneracy(pts: np.ndarray) -> str | None:
     Uses the singular values of the centred (N, 3) points: their ratios are
     scale-free, unlike the covariance eigenvalues (which square them).
     """
+    # Copies of one point: the mean's rounding would leave a spread of ulps
+    # whose singular values say nothing (50 copies of 0.1 read as collinear).
+    if (pts == pts[0]).all():
+        return "all points are identical"
     centred = pts - pts.mean(axis=0)
     s = np.linalg.svd(centred, compute_uv=False)  # descending, shape (3,)
     if s[0] == 0.0:
