@@ -505,6 +505,7 @@ def _grouped_result(n_points: int, source: str | None = None) -> Result:
 def test_segment_writes_ply_png_report(tmp_path, capsys, fake_pipeline):
     from plyfile import PlyData
 
+    from houghcad.io import read_points
     from houghcad.palette import point_colors
 
     inp = _write_xyz(tmp_path / "part.xyz", _blob(300))
@@ -522,7 +523,8 @@ def test_segment_writes_ply_png_report(tmp_path, capsys, fake_pipeline):
     np.testing.assert_array_equal(v["segment"], res.labels())
     np.testing.assert_array_equal(v["group"], res.group_labels())
     assert set(v["group"]) == {0, -1}
-    np.testing.assert_array_equal(np.column_stack([v["red"], v["green"], v["blue"]]), point_colors(res))
+    pts = read_points(inp).points
+    np.testing.assert_array_equal(np.column_stack([v["red"], v["green"], v["blue"]]), point_colors(res, "segment", pts))
     assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     html = paths["html"].read_text()
     assert html.count('<tr data-segment-id="') == 2 and html.count('<tr data-group-id="') == 1

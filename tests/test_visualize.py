@@ -62,17 +62,49 @@ def test_palette_base_colours_follow_the_paper():
     assert palette.type_code("no_such_family") == 0 and palette.type_color("no_such_family") == palette.OTHER_COLOR
 
 
-@pytest.mark.parametrize("family", sorted(palette.TYPE_CODES))
-def test_segment_shades_are_distinct_and_deterministic(family):
-    types = [family] * 12 + ["cylinder" if family != "cylinder" else "plane"]
-    cols = palette.segment_colors(types)
-    assert cols.shape == (13, 3) and cols.dtype == np.uint8
-    np.testing.assert_array_equal(cols, palette.segment_colors(types))
-    assert tuple(cols[0]) == palette.type_color(family)  # the first segment of a type: its base colour
-    same = cols[:12].astype(int)
-    dist = np.abs(same[:, None, :] - same[None, :, :]).sum(axis=2)
-    assert dist[np.triu_indices(12, 1)].min() >= 25  # no two shades alike
-    assert np.abs(np.diff(same, axis=0)).sum(axis=1).min() >= 35  # consecutive ids clearly apart
+def _delta_e(a, b) -> np.ndarray:
+    return np.linalg.norm(palette.srgb_to_lab(np.asarray(a)) - palette.srgb_to_lab(np.asarray(b)), axis=-1)
+
+
+def test_srgb_to_lab_matches_reference_values():
+    np.testing.assert_allclose(palette.srgb_to_lab(np.array([255, 255, 255])), [100, 0, 0], atol=1e-3)
+    np.testing.assert_allclose(palette.srgb_to_lab(np.array([255, 0, 0])), [53.24, 80.09, 67.20], atol=0.02)
+    np.testing.assert_allclose(palette.srgb_to_lab(np.array([0, 0, 0])), [0, 0, 0], atol=1e-9)
+
+
+def test_segment_palette_colours_are_far_apart_and_off_the_unsegmented_yellow():
+    pal = palette.segment_palette()
+    d = _delta_e(pal[:, None], pal[None])
+    assert d[np.triu_indices(len(pal), 1)].min() >= 30
+    assert _delta_e(pal, palette.UNSEGMENTED_COLOR).min() >= 35
+
+
+def test_adjacent_segments_differ_in_cielab():
+    # Ten planes, as a chain and as a star: neighbours differ by at least 30 ΔE, however
+    # many segments share the type; colours repeat only between segments far apart.
+    types = ["plane"] * 10
+    chain = np.array([[i, i + 1] for i in range(9)])
+    star = np.array([[0, i] for i in range(1, 10)])
+    for edges in (chain, star):
+        cols = palette.segment_colors(types, edges, np.arange(10, 0, -1))
+        assert cols.shape == (10, 3) and cols.dtype == np.uint8
+        np.testing.assert_array_equal(cols, palette.segment_colors(types, edges, np.arange(10, 0, -1)))
+        assert _delta_e(cols[edges[:, 0]], cols[edges[:, 1]]).min() >= 30
+    assert len({tuple(c) for c in palette.segment_colors(types, chain)}) <= 3  # a chain needs few colours
+    assert len({tuple(c) for c in palette.segment_colors(types)}) == 10  # no edges: all differ
+
+
+def test_adjacent_segments_of_a_real_part_differ_in_cielab():
+    import houghcad
+    from houghcad import synth
+
+    cloud = synth.block_with_hole_and_slot(seed=1, n_points=3000)
+    res = houghcad.segment(cloud.points)
+    edges = palette.segment_edges(res, cloud.points)
+    assert len(edges) >= len(res.segments) - 1  # a connected part
+    by_seg = palette.point_colors(res, "segment", cloud.points)
+    first = {s.id: by_seg[s.indices[0]] for s in res.segments}
+    assert min(_delta_e(first[a], first[b]) for a, b in edges.tolist()) >= 30
 
 
 def test_point_colours_and_codes():
@@ -108,7 +140,7 @@ def test_result_ply_round_trip(tmp_path):
     np.testing.assert_array_equal(v["group"], res.group_labels())
     assert set(v["group"][res.segments[1].indices]) == {0} and set(v["group"][res.segments[0].indices]) == {-1}
     rgb = np.column_stack([v["red"], v["green"], v["blue"]])
-    np.testing.assert_array_equal(rgb, palette.point_colors(res, "segment"))
+    np.testing.assert_array_equal(rgb, palette.point_colors(res, "segment", pts))
     assert v["red"].dtype == np.uint8
     assert [p.name for p in tmp_path.iterdir()] == ["out.ply"]  # no temporary file left
 
@@ -141,9 +173,9 @@ def test_png_views(tmp_path):
     assert len(colours) > 20
     flat = img.reshape(-1, 3).astype(int)
     for rgb in (palette.type_color("plane"), palette.type_color("cylinder"), palette.type_color("sphere"),
-                palette.UNSEGMENTED_COLOR, tuple(palette.segment_colors(["plane", "plane"])[1])):
+                palette.UNSEGMENTED_COLOR, tuple(palette.segment_palette()[1])):
         near = np.abs(flat - np.array(rgb)).sum(axis=1) <= 12
-        assert near.sum() > 20, rgb  # each type, a second shade, and the unsegmented points are drawn
+        assert near.sum() > 20, rgb  # each type, a second segment colour, and the unsegmented points are drawn
     assert [p.name for p in tmp_path.iterdir()] == ["views.png"]
 
 

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from .palette import (UNSEGMENTED_COLOR, group_color, hex_color, segment_colors, type_color,
+from .palette import (UNSEGMENTED_COLOR, group_color, hex_color, segment_colors, segment_edges, type_color,
                       types_present)
 from .render import draw_sample
 from .result import GROUP_KINDS, Result
@@ -99,7 +99,7 @@ def _segment_groups(result: Result) -> tuple[np.ndarray, list[list[int]]]:
     return colour_group, member_of
 
 
-def _payload(points: np.ndarray, result: Result, max_points: int) -> dict[str, Any]:
+def _payload(points: np.ndarray, result: Result, max_points: int, seg_rgb: np.ndarray) -> dict[str, Any]:
     """The JSON object the page's script reads (see the module docstring)."""
     sel = draw_sample(len(points), max_points)
     lab = result.labels()[sel]
@@ -114,7 +114,6 @@ def _payload(points: np.ndarray, result: Result, max_points: int) -> dict[str, A
     # when the coordinates carry a large common offset.
     planar = np.ascontiguousarray((P - centre).T, dtype="<f4")
     colour_group, member_of = _segment_groups(result)
-    seg_rgb = segment_colors([s.type for s in result.segments])
     traces = []
     for s in result.segments:
         traces.append({"id": s.id, "type": s.type, "n": int(len(s.indices)), "drawn": int(counts[s.id]),
@@ -137,8 +136,7 @@ def _payload(points: np.ndarray, result: Result, max_points: int) -> dict[str, A
     }
 
 
-def _segments_table(result: Result, member_of: list[list[int]]) -> str:
-    seg_rgb = segment_colors([s.type for s in result.segments])
+def _segments_table(result: Result, member_of: list[list[int]], seg_rgb: np.ndarray) -> str:
     rows = []
     for s in result.segments:
         mfe = f"{s.mfe:.3e}" if math.isfinite(s.mfe) else "-"
@@ -224,7 +222,10 @@ def build_html_report(points: np.ndarray, result: Result, *, title: str | None =
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape != (result.n_points, 3):
         raise ValueError(f"points must have shape ({result.n_points}, 3), got {pts.shape}")
-    data = _payload(pts, result, max_points)
+    # Adjacent segments clearly apart in the "by segment" colours.
+    seg_rgb = segment_colors([s.type for s in result.segments], segment_edges(result, pts),
+                             np.array([len(s.indices) for s in result.segments]))
+    data = _payload(pts, result, max_points, seg_rgb)
     _, member_of = _segment_groups(result)
     if title is None:
         title = f"houghcad: {os.path.basename(result.source)}" if result.source else "houghcad segmentation"
@@ -256,7 +257,7 @@ def build_html_report(points: np.ndarray, result: Result, *, title: str | None =
 <label>point size <input id="size" type="range" min="1" max="8" step="0.5" value="3"></label></div>
 <div id="help">drag: rotate, shift/right drag: pan, wheel: zoom, click: identify, double click: reset</div></div>
 </div>
-<section><h2>Segments</h2>{_segments_table(result, member_of)}</section>
+<section><h2>Segments</h2>{_segments_table(result, member_of, seg_rgb)}</section>
 <section><h2>Groups</h2>{_groups_table(result)}</section>
 <section><h2>Timing</h2>{_timing_table(result)}</section>
 <script type="application/json" id="houghcad-data">{data_json}</script>

@@ -8,14 +8,13 @@ Colours follow the paper's figures: planes red, cylinders green, cones blue,
 spheres magenta, tori black; the complex families have their own colours and
 unsegmented points are yellow. Each family declares its colour and PLY type
 code in its own file (:attr:`houghcad.families.Family.color`, ``type_code``);
-the tables here are live views of the registered families. The segments of
-one type get distinct shades of the type colour (:func:`segment_colors`),
-deterministic in the segment id.
+the tables here are live views of the registered families. In the "by
+segment" views, segments take colours of a palette spread in CIELAB, and
+adjacent segments clearly different ones (:func:`segment_colors`).
 """
 
 from __future__ import annotations
 
-import colorsys
 import functools
 from collections.abc import Mapping
 
@@ -49,13 +48,6 @@ GROUP_COLORS: tuple[tuple[int, int, int], ...] = (
 )
 NO_GROUP_COLOR: tuple[int, int, int] = (215, 215, 215)
 
-# The shades of one type: the base colour, then candidates of other lightness and a
-# slightly turned hue, taken in farthest-first order (each the farthest in RGB from
-# all taken before), so every shade differs clearly from the previous ones.
-_LEVELS = 13
-_HUE_TURNS = (0.0, -0.04, 0.04)  # fractions of the colour circle
-
-
 def type_code(type_name: str) -> int:
     """Integer code of a family name (:data:`TYPE_CODES`; 0 for an unknown family)."""
     return TYPE_CODES.get(type_name, OTHER_CODE)
@@ -77,52 +69,108 @@ def hex_color(rgb) -> str:
     return f"#{r:02x}{g:02x}{b:02x}"
 
 
-@functools.lru_cache(maxsize=64)
-def _shades(rgb: tuple[int, int, int]) -> np.ndarray:
-    """All shades of a base colour, shape (K, 3) uint8, row 0 the base colour itself."""
-    h, l, s = colorsys.rgb_to_hls(*(c / 255.0 for c in rgb))
-    # Black has no hue: its shades are greys, kept darker than mid-grey.
-    lo, hi = (0.12, 0.55) if l < 0.1 else (0.2, 0.8)
-    cand = [colorsys.hls_to_rgb((h + turn) % 1.0, level, s)
-            for turn in _HUE_TURNS for level in np.linspace(lo, hi, _LEVELS)]
-    cand = np.unique(np.rint(np.array(cand) * 255.0).astype(np.int64), axis=0)  # greys: turns coincide
-    chosen = [np.array(rgb, dtype=np.int64)]
-    dist = np.abs(cand - chosen[0]).sum(axis=1)
-    while True:
+def srgb_to_lab(rgb: np.ndarray) -> np.ndarray:
+    """CIELAB (D65) of uint8 sRGB colours, shape (..., 3) -> (..., 3).
+
+    The standard formulas, written out: none of the project's libraries
+    (numpy, matplotlib) converts to Lab, and these few lines are all it takes.
+    """
+    c = np.asarray(rgb, dtype=np.float64) / 255.0
+    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    M = np.array([[0.4124564, 0.3575761, 0.1804375],
+                  [0.2126729, 0.7151522, 0.0721750],
+                  [0.0193339, 0.1191920, 0.9503041]])
+    xyz = lin @ M.T / np.array([0.95047, 1.0, 1.08883])
+    eps, kappa = 216 / 24389, 24389 / 27
+    f = np.where(xyz > eps, np.cbrt(xyz), (kappa * xyz + 16) / 116)
+    return np.stack([116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], axis=-1)
+
+
+#: Colours of the "by segment" view: this many, each as far in CIELAB from the others as a
+#: farthest-point choice among sRGB colours gives.
+SEGMENT_PALETTE_SIZE = 24
+#: Lightness range of the segment colours: darker ones hide the shading, lighter ones vanish on white.
+_SEGMENT_L = (30.0, 85.0)
+#: A segment colour stays this far (ΔE, CIELAB) from the unsegmented points' yellow.
+_FROM_UNSEGMENTED = 35.0
+
+
+@functools.lru_cache(maxsize=1)
+def segment_palette() -> np.ndarray:
+    """The segment colours, shape (SEGMENT_PALETTE_SIZE, 3) uint8, in order of choice:
+    each the sRGB colour farthest in CIELAB from those before it (the first is the plane red)."""
+    levels = np.linspace(0, 255, 9)
+    cand = np.stack(np.meshgrid(levels, levels, levels, indexing="ij"), -1).reshape(-1, 3).round()
+    lab = srgb_to_lab(cand)
+    keep = (lab[:, 0] >= _SEGMENT_L[0]) & (lab[:, 0] <= _SEGMENT_L[1])
+    keep &= np.linalg.norm(lab - srgb_to_lab(np.array(UNSEGMENTED_COLOR)), axis=1) >= _FROM_UNSEGMENTED
+    cand, lab = cand[keep], lab[keep]
+    first = np.array(TYPE_COLORS.get("plane", (228, 26, 28)), dtype=np.float64)
+    chosen = [first]
+    dist = np.linalg.norm(lab - srgb_to_lab(first), axis=1)
+    while len(chosen) < SEGMENT_PALETTE_SIZE:
         j = int(np.argmax(dist))
-        if dist[j] < 10:  # the rest look like shades already taken
-            break
         chosen.append(cand[j])
-        dist = np.minimum(dist, np.abs(cand - cand[j]).sum(axis=1))
+        dist = np.minimum(dist, np.linalg.norm(lab - lab[j], axis=1))
     return np.array(chosen, dtype=np.uint8)
 
 
-def _shade(rgb: tuple[int, int, int], k: int) -> tuple[int, int, int]:
-    """The k-th shade (k >= 0) of a base colour, cycling past the last; k = 0 is the base colour."""
-    table = _shades(tuple(int(c) for c in rgb))
-    return tuple(int(c) for c in table[k % len(table)])
-
-
-def segment_colors(types: list[str]) -> np.ndarray:
-    """Colour of each segment: a shade of its type colour, by its rank among the segments of that type.
+def segment_colors(types: list[str], edges: np.ndarray | None = None,
+                   sizes: np.ndarray | None = None) -> np.ndarray:
+    """Colour of each segment for the "by segment" view: adjacent segments clearly differ.
 
     Parameters
     ----------
     types : list of str, length S
-        The segments' types in id order.
+        The segments' types in id order (their number is what matters here).
+    edges : ndarray (k, 2), optional
+        Pairs of adjacent segment ids (:func:`segment_edges`). None: every
+        pair counts as adjacent, so the colours all differ while the palette lasts.
+    sizes : ndarray (S,), optional
+        Points per segment: larger segments choose first.
 
     Returns
     -------
     ndarray of uint8, shape (S, 3)
-        RGB.  Deterministic: depends only on ``types``.
+        RGB from :func:`segment_palette`, chosen greedily: each segment takes
+        the colour farthest in CIELAB from its coloured neighbours' (the
+        earliest in the palette among equals, so colours repeat far apart).
+        Deterministic.
     """
-    rank: dict[str, int] = {}
-    out = np.zeros((len(types), 3), dtype=np.uint8)
-    for i, t in enumerate(types):  # one iteration per segment, not per point
-        k = rank.get(t, 0)
-        rank[t] = k + 1
-        out[i] = _shade(type_color(t), k)
-    return out
+    n = len(types)
+    pal = segment_palette()
+    lab = srgb_to_lab(pal)
+    dist = np.linalg.norm(lab[:, None] - lab[None], axis=-1)
+    order = np.argsort(-np.asarray(sizes), kind="stable") if sizes is not None else np.arange(n)
+    nbrs: list[list[int]] = [[] for _ in range(n)]
+    if edges is not None:
+        for a, b in np.asarray(edges, dtype=np.int64).reshape(-1, 2).tolist():
+            nbrs[a].append(b)
+            nbrs[b].append(a)
+    choice = np.full(n, -1, dtype=np.int64)
+    for rank, i in enumerate(order.tolist()):  # one iteration per segment, not per point
+        near = [choice[j] for j in (nbrs[i] if edges is not None else order[:rank].tolist()) if choice[j] >= 0]
+        if not near:
+            choice[i] = 0 if edges is not None else rank % len(pal)
+            continue
+        worst = dist[:, near].min(axis=1)  # each colour's distance to the nearest neighbour colour
+        choice[i] = int(np.argmax(worst >= worst.max() - 1e-9))  # the earliest of the best
+    return pal[choice]
+
+
+def segment_edges(result: Result, points: np.ndarray) -> np.ndarray:
+    """Pairs (k, 2) of segment ids of ``result`` that touch in the cloud ``points`` (n, 3):
+    a point of one within 2.5 median point spacings of a point of the other."""
+    from scipy.spatial import cKDTree
+
+    from .adjacency import SegmentGraph
+
+    pts = np.asarray(points, dtype=np.float64)
+    if len(result.segments) < 2 or len(pts) < 2:
+        return np.zeros((0, 2), np.int64)
+    sample = pts[:: max(1, len(pts) // 20000)]
+    spacing = float(np.median(cKDTree(pts).query(sample, k=2)[0][:, 1]))
+    return SegmentGraph.build(result.labels(), pts, 2.5 * spacing).edges
 
 
 def types_present(result: Result) -> list[str]:
@@ -131,15 +179,18 @@ def types_present(result: Result) -> list[str]:
     return sorted(names, key=lambda t: (TYPE_CODES.get(t, 99), t))
 
 
-def point_colors(result: Result, by: str = "segment") -> np.ndarray:
+def point_colors(result: Result, by: str = "segment", points: np.ndarray | None = None) -> np.ndarray:
     """Per-point colours of a result.
 
     Parameters
     ----------
     result : Result
     by : {"segment", "type"}
-        ``"segment"``: each segment in its own shade of its type colour;
-        ``"type"``: every segment in its type's base colour.
+        ``"segment"``: colours from :func:`segment_colors`, adjacent segments
+        (in ``points``, when given) clearly apart; ``"type"``: every segment
+        in its type's colour.
+    points : ndarray (n_points, 3), optional
+        The cloud, to find which segments touch.
 
     Returns
     -------
@@ -148,7 +199,8 @@ def point_colors(result: Result, by: str = "segment") -> np.ndarray:
     """
     types = [s.type for s in result.segments]
     if by == "segment":
-        table = segment_colors(types)
+        edges = segment_edges(result, points) if points is not None else None
+        table = segment_colors(types, edges, np.array([len(s.indices) for s in result.segments]))
     elif by == "type":
         table = np.array([type_color(t) for t in types], dtype=np.uint8).reshape(-1, 3)
     else:

@@ -141,7 +141,7 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
         raise ValueError(f"points must have shape ({result.n_points}, 3), got {pts.shape}")
     sel = draw_sample(len(pts), max_points)
     P = principal_frame(pts[sel])
-    colours = {by: point_colors(result, by)[sel] for by in ("type", "segment")}
+    colours = {by: point_colors(result, by, pts)[sel] for by in ("type", "segment")}
     lo, hi = P.min(axis=0), P.max(axis=0)
     centre = (lo + hi) / 2.0
     # Half the side of a view, with a margin: the largest half-extent for the

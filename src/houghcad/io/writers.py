@@ -223,8 +223,8 @@ def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: A
     ``segment`` (segment id, -1 unsegmented), ``type`` (family code of
     :data:`houghcad.palette.TYPE_CODES`, -1 unsegmented, 0 unknown family) and
     ``group`` (:meth:`~houghcad.result.Result.group_labels`, -1 none), and the
-    uchar colours ``red green blue`` (:func:`houghcad.palette.point_colors`,
-    one shade of the type colour per segment).
+    uchar colours ``red green blue`` (:func:`houghcad.palette.point_colors`
+    by segment: adjacent segments clearly apart).
     """
     from ..palette import point_colors, point_type_codes
 
@@ -232,7 +232,7 @@ def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: A
     if pts.ndim != 2 or pts.shape[0] != result.n_points:
         raise ValueError(f"points must have shape ({result.n_points}, 3), got {pts.shape}")
     fields = {"segment": result.labels(), "type": point_type_codes(result), "group": result.group_labels()}
-    write_points_ply(path, pts, fields=fields, colors=point_colors(result, "segment"))
+    write_points_ply(path, pts, fields=fields, colors=point_colors(result, "segment", pts))
 
 
 def write_trace_ply(path: str | os.PathLike[str], points: np.ndarray, seg: Any, pass_name: str) -> None:
