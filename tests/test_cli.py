@@ -517,7 +517,7 @@ def test_segment_writes_ply_png_report(tmp_path, capsys, fake_pipeline):
     out = capsys.readouterr().out
     for p in paths.values():
         assert f"wrote {p}" in out
-    assert "translation" in out and "radius 2" in out  # the groups follow the family table
+    assert "translation" in out and "repeated by translation" in out  # the groups follow the family table
     res = _grouped_result(300)
     v = PlyData.read(str(paths["ply"]))["vertex"].data
     np.testing.assert_array_equal(v["segment"], res.labels())
@@ -628,18 +628,36 @@ def test_demo_writes_every_view(tmp_path, capsys, monkeypatch, fake_pipeline):
     assert all(f"wrote {tmp_path / 'd' / n}" in out for n in names)
 
 
+def test_group_sentences_say_what_the_members_share():
+    from houghcad.report import group_sentence
+    from houghcad.result import Group
+
+    res = _fake_result(100)
+    kinds = [s.type for s in res.segments]
+    res.segments[0].type = res.segments[1].type = "plane"
+    assert group_sentence(Group("reflection", [0, 1], {"extent": [1.0, 2.0, 0.5]}), res) == \
+        "2 planes of equal size (1, 2, 0.5), mirrored across a plane"
+    assert group_sentence(Group("same_primitive", [0], {"parts": 3}), res) == "one plane in 3 separate parts"
+    assert group_sentence(Group("parallel", [0, 1], {"normal": [0, 0, 1.0]}), res) == "2 planes with parallel normals"
+    res.segments[1].type = "torus"
+    assert group_sentence(Group("coaxial", [0, 1], {}), res) == "2 segments on one axis"
+    del kinds
+
+
 def test_groups_table():
     from houghcad.report import groups_table, summary_table
     from houghcad.result import Group
 
     res = _fake_result(100)
     assert groups_table(res) == "" and "kind" not in summary_table(res)
-    res.groups = [Group("parallel", [0, 1], {"normal": [0.0, 0.0, 1.0]}),
-                  Group("translation", list(range(9)), {"offset": [2.0, 0.0, 0.0], "radius": 0.123456})]
+    for s in res.segments:
+        s.type = "cylinder"
+    res.groups = [Group("parallel", [0, 1], {"axis": [0.0, 0.0, 1.0]}),
+                  Group("translation", [0, 1], {"offset": [2.0, 0.0, 0.0], "radius": 0.123456})]
     lines = groups_table(res).splitlines()
-    assert lines[0].split() == ["group", "kind", "members", "shared"]
+    assert lines[0].split() == ["group", "kind", "members", "what"]
     assert lines[2].split()[:2] == ["1", "translation"]  # kinds in GROUP_KINDS order
-    assert "0, 1, 2, 3, 4, 5, ... (+3)" in lines[2] and "radius 0.1235, offset (2, 0, 0)" in lines[2]
-    assert lines[3].split()[:4] == ["0", "parallel", "0,", "1"] and "normal (0, 0, 1)" in lines[3]
+    assert lines[2].endswith("2 cylinders of equal radius 0.1235, repeated by translation")
+    assert lines[3].split()[:4] == ["0", "parallel", "0,", "1"] and lines[3].endswith("2 cylinders with parallel axes")
     table = summary_table(res)
     assert table.index("unsegmented") < table.index("translation") < table.index("time")

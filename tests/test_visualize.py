@@ -90,8 +90,10 @@ def test_adjacent_segments_differ_in_cielab():
         assert cols.shape == (10, 3) and cols.dtype == np.uint8
         np.testing.assert_array_equal(cols, palette.segment_colors(types, edges, np.arange(10, 0, -1)))
         assert _delta_e(cols[edges[:, 0]], cols[edges[:, 1]]).min() >= 30
-    assert len({tuple(c) for c in palette.segment_colors(types, chain)}) <= 3  # a chain needs few colours
+    assert len({tuple(c) for c in palette.segment_colors(types, chain)}) == 10  # varied while the palette lasts
     assert len({tuple(c) for c in palette.segment_colors(types)}) == 10  # no edges: all differ
+    many = palette.segment_colors(["plane"] * 60, np.array([[i, i + 1] for i in range(59)]))
+    assert len({tuple(c) for c in many}) == len(palette.segment_palette())  # then colours repeat
 
 
 def test_adjacent_segments_of_a_real_part_differ_in_cielab():
@@ -414,6 +416,10 @@ def test_report_renders_in_headless_chromium(browser, cli_outputs):
     plane_red = np.array(palette.type_color("plane"))
     coloured = (np.abs(img - img[2, 2]).sum(axis=2) > 60)  # differs from the background corner
     assert coloured.mean() > 0.02
+    # The part, not its bounding sphere, fills the view: it spans most of the narrower side.
+    ys, xs = np.nonzero(coloured)
+    span = max((xs.max() - xs.min()) / img.shape[1], (ys.max() - ys.min()) / img.shape[0])
+    assert span > 0.8, span
     assert (np.abs(img - plane_red).sum(axis=2) < 30).sum() > 50
     assert browser.execute_script("return window.houghcadView.traces") == len(res.segments) + 1
 

@@ -40,6 +40,7 @@ import numpy as np
 from .palette import (UNSEGMENTED_COLOR, group_color, hex_color, segment_colors, segment_edges, type_color,
                       types_present)
 from .render import draw_sample
+from .report import group_sentence
 from .result import GROUP_KINDS, Result
 
 __all__ = ["write_html_report", "build_html_report", "MAX_REPORT_POINTS"]
@@ -165,9 +166,10 @@ def _groups_table(result: Result) -> str:
         rows.append(f'<tr data-group-id="{g_id}"><td class="num">{g_id}</td>'
                     f'<td><span class="sw" style="background:{hex_color(group_color(g_id))}"></span>'
                     f'{html.escape(g.kind)}</td><td>{", ".join(str(int(m)) for m in g.members)}</td>'
+                    f'<td>{html.escape(group_sentence(g, result))}</td>'
                     f'<td class="params">{_fmt_params(g.descriptors)}</td></tr>')
-    return ('<table id="groups"><thead><tr><th>id</th><th>kind</th><th>members</th><th>shared descriptors</th>'
-            f'</tr></thead><tbody>{"".join(rows)}</tbody></table>')
+    return ('<table id="groups"><thead><tr><th>id</th><th>kind</th><th>members</th><th>what</th>'
+            f'<th>shared descriptors</th></tr></thead><tbody>{"".join(rows)}</tbody></table>')
 
 
 def _timing_table(result: Result) -> str:
@@ -176,11 +178,27 @@ def _timing_table(result: Result) -> str:
     return f'<table id="timing"><thead><tr><th>stage</th><th>seconds</th></tr></thead><tbody>{rows}</tbody></table>'
 
 
+def _options_line(options: dict[str, Any]) -> str:
+    """The options in one line: the tolerances that differ from their defaults, not all of them,
+    and the derived scales."""
+    from .tolerances import Tolerances
+
+    shown = {k: v for k, v in options.items() if k not in ("tolerances", "derived")}
+    if isinstance(options.get("tolerances"), dict):
+        try:
+            shown["tolerances"] = Tolerances.from_dict(options["tolerances"]).changed() or "defaults"
+        except ValueError:  # a result from another version
+            shown["tolerances"] = "(unreadable)"
+    if isinstance(options.get("derived"), dict):
+        shown.update({f"derived {k}": v for k, v in options["derived"].items()})
+    return ", ".join(f"{k}={_fmt_num(v) if not isinstance(v, (dict, str)) else v}" for k, v in shown.items())
+
+
 def _summary(result: Result, n_drawn: int) -> str:
     src = html.escape(str(result.source)) if result.source else "(no file)"
     share = 100.0 * len(result.unsegmented) / result.n_points if result.n_points else 0.0
     drawn = "" if n_drawn == result.n_points else f" ({n_drawn} drawn, a deterministic sample)"
-    opts = html.escape(", ".join(f"{k}={_fmt_num(v)}" for k, v in result.options.items()))
+    opts = html.escape(_options_line(result.options))
     return (f'<p id="summary">Source: <code>{src}</code><br>{result.n_points} points{drawn}, '
             f'<span id="n-segments">{len(result.segments)}</span> segments, {len(result.groups)} groups, '
             f'{len(result.unsegmented)} unsegmented points ({share:.1f}%).<br>Options: {opts}</p>')

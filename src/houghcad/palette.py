@@ -91,6 +91,8 @@ def srgb_to_lab(rgb: np.ndarray) -> np.ndarray:
 SEGMENT_PALETTE_SIZE = 24
 #: Lightness range of the segment colours: darker ones hide the shading, lighter ones vanish on white.
 _SEGMENT_L = (30.0, 85.0)
+#: Adjacent segments' colours differ by at least this (ΔE, CIELAB) while the palette allows.
+_APART = 30.0
 #: A segment colour stays this far (ΔE, CIELAB) from the unsegmented points' yellow.
 _FROM_UNSEGMENTED = 35.0
 
@@ -132,9 +134,9 @@ def segment_colors(types: list[str], edges: np.ndarray | None = None,
     Returns
     -------
     ndarray of uint8, shape (S, 3)
-        RGB from :func:`segment_palette`, chosen greedily: each segment takes
-        the colour farthest in CIELAB from its coloured neighbours' (the
-        earliest in the palette among equals, so colours repeat far apart).
+        RGB from :func:`segment_palette`, chosen greedily, larger segments
+        first: each takes, among the colours at least 30 ΔE (CIELAB) from its
+        coloured neighbours' (or the farthest ones), the least used so far.
         Deterministic.
     """
     n = len(types)
@@ -148,13 +150,15 @@ def segment_colors(types: list[str], edges: np.ndarray | None = None,
             nbrs[a].append(b)
             nbrs[b].append(a)
     choice = np.full(n, -1, dtype=np.int64)
+    used = np.zeros(len(pal), np.int64)
     for rank, i in enumerate(order.tolist()):  # one iteration per segment, not per point
         near = [choice[j] for j in (nbrs[i] if edges is not None else order[:rank].tolist()) if choice[j] >= 0]
-        if not near:
-            choice[i] = 0 if edges is not None else rank % len(pal)
-            continue
-        worst = dist[:, near].min(axis=1)  # each colour's distance to the nearest neighbour colour
-        choice[i] = int(np.argmax(worst >= worst.max() - 1e-9))  # the earliest of the best
+        worst = dist[:, near].min(axis=1) if near else np.full(len(pal), np.inf)
+        # Any colour clearly apart from the neighbours' will do; among those the least used
+        # (the segment list stays varied), the earliest among equals.
+        ok = worst >= min(worst.max(), _APART)
+        choice[i] = int(np.flatnonzero(ok)[np.argmin(used[ok])])
+        used[choice[i]] += 1
     return pal[choice]
 
 

@@ -68,26 +68,61 @@ def _fmt_members(members: list[int], limit: int = 6) -> str:
     return shown + (f", ... (+{len(members) - limit})" if len(members) > limit else "")
 
 
+_PLURAL = {"sphere": "spheres", "torus": "tori", "annulus": "annuli"}
+#: The shape descriptor a sentence names first, per family.
+_SHAPE_WORDS = {"plane": ("extent", "size"), "cylinder": ("radius", "radius"), "sphere": ("radius", "radius"), "cone": ("half_angle", "half-angle"),
+                "torus": ("major_radius", "radii")}
+_HOW = {"translation": "repeated by translation", "rotation": "repeated by rotation",
+        "reflection": "mirrored across a plane"}
+
+
+def _plural(type_name: str, n: int) -> str:
+    name = type_name.replace("_", " ")
+    return name if n == 1 else _PLURAL.get(type_name, name + "s")
+
+
+def group_sentence(group, result: Result) -> str:
+    """A plain-language line for an association group, e.g. "6 cylinders of
+    equal radius 2.5, repeated by translation"."""
+    n = len(group.members)
+    types = sorted({result.segments[m].type for m in group.members if 0 <= m < len(result.segments)})
+    t = types[0] if len(types) == 1 else "segment"
+    d = group.descriptors
+    if group.kind in _HOW:
+        key, word = _SHAPE_WORDS.get(t, (None, "shape"))
+        shape = f"equal {word} {_fmt_descriptor(d[key])}" if key in d else "equal shape"
+        return f"{n} {_plural(t, n)} of {shape}, {_HOW[group.kind]}"
+    if group.kind == "same_primitive":
+        parts = d.get("parts")
+        if n == 1 and parts:
+            return f"one {t.replace('_', ' ')} in {int(parts)} separate parts"
+        return f"{n} segments on one {t.replace('_', ' ')}"
+    if group.kind == "coaxial":
+        return f"{n} {_plural(t, n)} on one axis"
+    if group.kind == "parallel":
+        what = "normals" if t == "plane" else "axes"
+        return f"{n} {_plural(t, n)} with parallel {what}"
+    return f"{n} segments ({group.kind})"
+
+
 def groups_table(result: Result) -> str:
     """Fixed-width text table of the association groups, empty string when there are none.
 
     One row per group, by kind (:data:`~houghcad.result.GROUP_KINDS` order)
-    then id: group id, kind, member segment ids, and the shared descriptors
-    (``radius 2.5``, ``axis (0, 0, 1)`` ..., world units, 4 significant digits).
+    then id: group id, kind, member segment ids, and what they share in plain
+    language (:func:`group_sentence`; world units, 4 significant digits).
     """
     if not result.groups:
         return ""
     order = sorted(range(len(result.groups)), key=lambda i: (
         GROUP_KINDS.index(result.groups[i].kind) if result.groups[i].kind in GROUP_KINDS else len(GROUP_KINDS), i))
-    header = f"{'group':<6}{'kind':<16}{'members':<28}shared"
+    header = f"{'group':<6}{'kind':<16}{'members':<28}what"
     lines = [header, "-" * len(header)]
     for i in order:
         g = result.groups[i]
         # Scalars (radius, angle, count) say most in least room: they go first.
-        items = sorted(g.descriptors.items(), key=lambda kv: isinstance(kv[1], (list, tuple, np.ndarray)))
-        shared = ", ".join(f"{k} {_fmt_descriptor(v)}" for k, v in items)
         members = _fmt_members(g.members)
-        lines.append(f"{i:<6d}{g.kind:<16}{members:<27} {shared}".rstrip())
+        lines.append(f"{i:<6d}{g.kind:<16}{members:<27} {group_sentence(g, result)}".rstrip())
     return "\n".join(lines)
 
 

@@ -44,25 +44,47 @@
   // ---------------------------------------------------------------- camera (z up, orbit about the centre)
   var R = D.radius, FOV = 30 * Math.PI / 180;
   var cam = {};
-  function home(az, el) { cam.az = az; cam.el = el; cam.zoom = 1; cam.target = [0, 0, 0]; }
+  // The view's share the part fills when it is framed (its farthest projected point).
+  var FILL = 0.92;
+  function home(az, el) { cam.az = az; cam.el = el; cam.zoom = 1; cam.target = [0, 0, 0]; cam.fit = null; }
   home(-Math.PI / 4, 0.6);
   function sub(a, b) { return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]; }
   function cross(a, b) { return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]; }
   function norm(a) { var l = Math.hypot(a[0], a[1], a[2]) || 1; return [a[0] / l, a[1] / l, a[2] / l]; }
   function dot(a, b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+  function axes(az, el) {  // right, up, forward of a view direction
+    var f = [-Math.cos(el) * Math.cos(az), -Math.cos(el) * Math.sin(az), -Math.sin(el)];
+    var r = norm(cross(f, [0, 0, 1]));
+    return {r: r, u: cross(r, f), f: f};
+  }
+  function scales() {  // the projection's x and y scales: the narrower side of the view holds the fov
+    var t = 1 / Math.tan(FOV / 2), aspect = canvas.width / Math.max(canvas.height, 1);
+    return [t / Math.max(aspect, 1), t * Math.min(aspect, 1)];
+  }
+  function fitDistance() {
+    // The nearest camera distance at which every drawn point projects within FILL of the
+    // view: a point at (x, y) across the view and z toward the camera needs
+    // dist >= z + max(sx |x|, sy |y|) / FILL. The part, not its bounding sphere, fills the view.
+    var a = axes(cam.az, cam.el), s = scales(), best = 1e-9 * R, front = -R;
+    for (var i = 0; i < n; i++) {
+      var p = [xyz[i], xyz[n + i], xyz[2 * n + i]], z = -dot(p, a.f);
+      var d = z + Math.max(s[0] * Math.abs(dot(p, a.r)), s[1] * Math.abs(dot(p, a.u))) / FILL;
+      if (d > best) best = d;
+      if (z > front) front = z;
+    }
+    // The nearest point stays in front of the near plane.
+    return n ? Math.max(best, front + 0.05 * R) : R / Math.sin(FOV / 2);
+  }
   function frame() {  // eye, right, up, forward (world, offsets from the centre)
-    var dist = R / Math.sin(FOV / 2) * 0.9 / cam.zoom;  // the part fills the view; zoom out with the wheel
-    var f = [-Math.cos(cam.el) * Math.cos(cam.az), -Math.cos(cam.el) * Math.sin(cam.az), -Math.sin(cam.el)];
-    var r = norm(cross(f, [0, 0, 1])), u = cross(r, f);
+    if (cam.fit === null) cam.fit = fitDistance();  // when framed (home, a new size); zoom with the wheel
+    var dist = cam.fit / cam.zoom, a = axes(cam.az, cam.el), f = a.f;
     var eye = [cam.target[0] - dist * f[0], cam.target[1] - dist * f[1], cam.target[2] - dist * f[2]];
-    return {eye: eye, r: r, u: u, f: f, dist: dist};
+    return {eye: eye, r: a.r, u: a.u, f: f, dist: dist};
   }
   function mvpMatrix() {  // column-major projection * view
-    var c = frame(), w = canvas.width, h = canvas.height;
-    var near = Math.max(c.dist - 2 * R, c.dist * 0.01), far = c.dist + 2 * R;
-    // The bounding sphere fits the narrower side of the view.
-    var t = 1 / Math.tan(FOV / 2), aspect = w / Math.max(h, 1);
-    var sx = t / Math.max(aspect, 1), sy = t * Math.min(aspect, 1);
+    var c = frame();
+    var near = Math.max(c.dist - 2 * R, Math.min(c.dist * 0.01, 0.02 * R)), far = c.dist + 2 * R;
+    var s = scales(), sx = s[0], sy = s[1];
     var A = (far + near) / (near - far), B = 2 * far * near / (near - far);
     var V = [c.r, c.u, [-c.f[0], -c.f[1], -c.f[2]]];
     var tr = [-dot(c.r, c.eye), -dot(c.u, c.eye), dot(c.f, c.eye)];
@@ -81,7 +103,7 @@
     pending = false;
     var dpr = window.devicePixelRatio || 1, w = Math.round(canvas.clientWidth * dpr),
         h = Math.round(canvas.clientHeight * dpr);
-    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; cam.fit = null; }
     gl.viewport(0, 0, canvas.width, canvas.height);
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
     mvp = mvpMatrix();
