@@ -462,6 +462,33 @@ def test_segment_trace_on_a_file_is_refused(tmp_path, capsys, fake_pipeline):
     assert not (tmp_path / "o.json").exists()
 
 
+def test_segment_ply_keeps_the_input_fields_and_adds_normals_and_distances(tmp_path):
+    from plyfile import PlyData
+
+    from houghcad import synth
+    from houghcad.io import write_points_ply
+
+    cloud = synth.block_with_hole_and_slot(seed=1, n_points=3000, noise=0.002)
+    n = len(cloud.points)
+    inp = tmp_path / "in.ply"
+    intensity = (np.arange(n) * 7) % 250
+    write_points_ply(inp, cloud.points, fields={"intensity": intensity, "segment": np.ones(n)},
+                     colors=np.full((n, 3), 100))
+    assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "--ply", str(tmp_path / "o.ply"), "-q"]) == 0
+    v = PlyData.read(str(tmp_path / "o.ply"))["vertex"].data
+    np.testing.assert_array_equal(v["intensity"], intensity)  # the input's own fields, kept
+    assert (v["input_segment"] == 1).all() and (v["input_red"] == 100).all()  # renamed where ours collide
+    data = json.loads((tmp_path / "r.json").read_text())
+    lab = np.asarray(v["segment"])
+    normals = np.column_stack([v["nx"], v["ny"], v["nz"]])
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-5)
+    assert np.isnan(v["distance"][lab < 0]).all() and np.isfinite(v["distance"][lab >= 0]).all()
+    sigma = data["options"]["derived"]["sigma"]
+    np.testing.assert_allclose(v["distance_sigma"][lab >= 0], v["distance"][lab >= 0] / sigma, rtol=1e-4)
+    # Noise-aware: the points lie within a few σ of their surfaces.
+    assert 0.3 < np.median(v["distance_sigma"][lab >= 0]) < 2.0
+
+
 def test_demo_real(tmp_path, capsys):
     assert main(["demo", "-o", str(tmp_path / "demo"), "--quiet"]) == 0
     assert capsys.readouterr() == ("", "")

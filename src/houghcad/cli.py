@@ -258,7 +258,7 @@ def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | N
     if ply is not None:
         from .io.writers import write_result_ply
 
-        _write(ply, lambda p, r: write_result_ply(p, cloud.points, r), result)
+        _write(ply, lambda p, r: write_result_ply(p, cloud.points, r, cloud.fields), result)
         written.append(ply)
     if png is not None:
         from .render import render_png

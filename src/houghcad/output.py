@@ -23,11 +23,13 @@ MAX_REFIT_POINTS = 4000
 
 
 def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed, points: np.ndarray,
-                   seed: int) -> tuple[list[Segment], list[Group]]:
+                   seed: int, distances: np.ndarray | None = None) -> tuple[list[Segment], list[Group]]:
     """The output segments (largest first) and groups, world coordinates.
 
     ``seg`` holds the associated segments with their parts
     (:attr:`Segmentation.parts`); ``points`` (n, 3) are the input's.
+    ``distances`` (n,), when given, receives each segmented point's distance
+    to its segment's fitted surface (world units).
     """
     T = pre.transform
     order = sorted(range(len(seg)), key=lambda k: (-len(seg.indices(k)), int(seg.indices(k)[0])))
@@ -35,20 +37,23 @@ def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed,
     check = Context(pre=pre, tau=0, epsilon=0, angle=0, link=0, cell=0, min_points=0, max_radius=_ANY_RADIUS)
     rng = np.random.default_rng(seed)
 
-    def fitted(fam: Family, prim0: Primitive, idx: np.ndarray, fixed: bool = False) -> tuple[dict, float]:
+    def fitted(fam: Family, prim0: Primitive, idx: np.ndarray, fixed: bool = False,
+               record: bool = False) -> tuple[dict, float]:
         P, N = pre.points[idx], pre.normals[idx]
         sel = np.arange(len(P)) if len(P) <= MAX_REFIT_POINTS else \
             np.sort(rng.choice(len(P), MAX_REFIT_POINTS, replace=False))
         prim = None if fixed else fam.fit(prim0, P[sel], N[sel])
         if prim is None or not fam.valid(prim, check):
             prim = prim0
-        mfe = mean_fitting_error(fam.distance(prim, P) / T.scale, points[idx])
-        return plain(fam.to_world(prim, T)), mfe
+        d = fam.distance(prim, P) / T.scale
+        if record and distances is not None:
+            distances[idx] = d
+        return plain(fam.to_world(prim, T)), mean_fitting_error(d, points[idx])
 
     out: list[Segment] = []
     for k in order:
         r, idx = seg.records[k], seg.indices(k)
-        params, mfe = fitted(r.family, r.prim, idx, r.fixed)
+        params, mfe = fitted(r.family, r.prim, idx, r.fixed, record=True)
         parts = []
         pieces = seg.parts[k] if seg.parts is not None else [idx]
         if len(pieces) > 1:

@@ -372,7 +372,8 @@ class Segmenter:
         self.segmentation_ = seg
         t = time.perf_counter()
         run.progress("output", _OUTPUT_AT)
-        out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed)
+        distances = np.full(len(points), np.nan)
+        out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed, distances)
         timing = {**timing, "output": time.perf_counter() - t}
         timing["total"] = sum(v for k, v in timing.items() if k != "total")
         ctx = run.ctx
@@ -386,7 +387,8 @@ class Segmenter:
                                "angle_deg": float(np.degrees(ctx.angle)), "min_points": ctx.min_points}}
         unsegmented = np.flatnonzero(seg.labels < 0).astype(np.int64)
         return Result(n_points=len(points), segments=out, unsegmented=unsegmented, timing=timing,
-                      options=options, source=source, groups=groups)
+                      options=options, source=source, groups=groups,
+                      normals=ctx.pre.transform.inv_dirs(ctx.pre.normals), distances=distances)
 
     def _tracer(self, points: np.ndarray) -> TraceFn | None:
         if self.trace is None or callable(self.trace):

@@ -161,6 +161,11 @@ class Result:
         Path of the input file, when there was one.
     groups : list of Group
         Relations between segments (association step).
+    normals : ndarray (n_points, 3) or None
+        The unit normals the run used, world axes (not saved in the JSON).
+    distances : ndarray (n_points,) or None
+        Each point's distance to its segment's fitted surface, world units;
+        NaN where unsegmented (not saved in the JSON).
     """
 
     n_points: int
@@ -170,6 +175,8 @@ class Result:
     options: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
     groups: list[Group] = field(default_factory=list)
+    normals: np.ndarray | None = field(default=None, repr=False, compare=False)
+    distances: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def labels(self) -> np.ndarray:
         """Per-point segment id, shape (n_points,), -1 for unsegmented points."""

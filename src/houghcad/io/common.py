@@ -1,8 +1,9 @@
 """What the format readers of :mod:`houghcad.io` share: the reader signature and text helpers.
 
-A reader is ``read(data, source) -> (points, normals)``: ``data`` the file's bytes, ``source``
-its name for error messages, ``points`` (N, 3) float64 in the file's units and ``normals``
-(N, 3) or None. Validation (finite, count, degeneracy) happens afterwards in
+A reader is ``read(data, source) -> (points, normals)`` or ``(points, normals, fields)``:
+``data`` the file's bytes, ``source`` its name for error messages, ``points`` (N, 3) float64 in
+the file's units, ``normals`` (N, 3) or None, and ``fields`` the file's other per-point
+attributes (intensity, colour ...), name -> (N,) array. Validation (finite, count, degeneracy) happens afterwards in
 :func:`houghcad.io.readers.validate_points`, so readers only parse.
 """
 
@@ -10,12 +11,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numpy as np
 
 from ..errors import InputError
 
-#: (points (N, 3) float64, normals (N, 3) or None) as a reader returns them.
-Parsed = tuple[np.ndarray, "np.ndarray | None"]
+#: (points (N, 3) float64, normals (N, 3) or None[, fields]) as a reader returns them.
+Parsed = tuple
 
 #: ``read(data, source) -> Parsed``.
 Reader = Callable[[bytes, str], Parsed]

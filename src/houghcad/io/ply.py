@@ -1,7 +1,8 @@
 """PLY reader [``ply``]: ascii or binary (either endianness), normals from ``nx ny nz``.
 
 The vertex element's ``x, y, z`` (any case) are the points; ``nx, ny, nz`` or
-``normal_x, normal_y, normal_z`` the normals when present and numeric.
+``normal_x, normal_y, normal_z`` the normals when present and numeric; its other
+numeric scalar properties are kept as the cloud's ``fields``.
 """
 
 from __future__ import annotations
@@ -43,11 +44,16 @@ def read_ply(data: bytes, source: str) -> Parsed:
     except (TypeError, ValueError):
         raise InputError(f"{source}: PLY x, y, z properties are not numeric") from None
     normals = None
+    used = {"x", "y", "z"}
     for names in (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z")):
         if all(n in props for n in names):
             try:
                 normals = np.column_stack([arr[props[n]] for n in names]).astype(np.float64)
+                used |= set(names)
             except (TypeError, ValueError):
                 normals = None
             break
-    return points, normals
+    # The vertex's other scalar properties (intensity, colour ...) go through to the outputs.
+    fields = {props[k]: np.asarray(arr[props[k]]) for k in props
+              if k not in used and np.asarray(arr[props[k]]).dtype.kind in "iufb"}
+    return points, normals, fields

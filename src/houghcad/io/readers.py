@@ -35,7 +35,7 @@ row in :data:`FORMAT_TABLE`.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Callable
 
@@ -130,11 +130,15 @@ class PointCloud:
         Unit normals when the file carried valid ones.
     source : str or None
         Path the cloud was read from.
+    fields : dict of str to ndarray (N,)
+        The file's other per-point attributes (intensity, colour ...), kept
+        for the outputs.
     """
 
     points: np.ndarray
     normals: np.ndarray | None = None
     source: str | None = None
+    fields: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -179,9 +183,10 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None) -> PointCl
         fmt = fmt.lower().lstrip(".")
         if fmt not in FORMATS:
             raise InputError(f"{source}: unknown format {fmt!r} (expected one of {', '.join(FORMATS)})")
-    points, normals = _BY_NAME[fmt].read(data, source)
-    points, normals = validate_points(points, source, normals, return_normals=True)
-    return PointCloud(points=points, normals=normals, source=source)
+    parsed = _BY_NAME[fmt].read(data, source)
+    points, normals = validate_points(parsed[0], source, parsed[1], return_normals=True)
+    fields = dict(parsed[2]) if len(parsed) > 2 else {}
+    return PointCloud(points=points, normals=normals, source=source, fields=fields)
 
 
 

@@ -207,7 +207,8 @@ def write_points_ply(
         ply.write(f)
 
 
-def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: Any) -> None:
+def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: Any,
+                     extra: Mapping[str, np.ndarray] | None = None) -> None:
     """Write a segmented cloud as a coloured binary PLY for CloudCompare, MeshLab ..., atomically.
 
     Parameters
@@ -218,21 +219,39 @@ def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: A
         The input cloud in world coordinates (``N == result.n_points``).
     result : houghcad.result.Result
         Its segmentation.
+    extra : mapping of name -> array (N,), optional
+        The input's own per-point fields (intensity, colour ...), kept; one
+        whose name the output uses gets the prefix ``input_``.
 
-    The ``vertex`` element has ``x y z`` (float64), the int32 scalar fields
-    ``segment`` (segment id, -1 unsegmented), ``type`` (family code of
-    :data:`houghcad.palette.TYPE_CODES`, -1 unsegmented, 0 unknown family) and
-    ``group`` (:meth:`~houghcad.result.Result.group_labels`, -1 none), and the
-    uchar colours ``red green blue`` (:func:`houghcad.palette.point_colors`
-    by segment: adjacent segments clearly apart).
+    The ``vertex`` element has ``x y z`` (float64); the input's own fields;
+    ``nx ny nz``, the normals the run used (when the result has them);
+    ``distance``, each point's distance to its segment's fitted surface in
+    the input's units, and ``distance_sigma``, the same in estimated noise σ
+    (NaN where unsegmented); the int32 fields ``segment`` (segment id, -1
+    unsegmented), ``type`` (family code of :data:`houghcad.palette.TYPE_CODES`,
+    -1 unsegmented, 0 unknown family) and ``group``
+    (:meth:`~houghcad.result.Result.group_labels`, -1 none); and the uchar
+    colours ``red green blue`` (:func:`houghcad.palette.point_colors` by
+    segment: adjacent segments clearly apart).
     """
     from ..palette import point_colors, point_type_codes
 
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[0] != result.n_points:
         raise ValueError(f"points must have shape ({result.n_points}, 3), got {pts.shape}")
-    fields = {"segment": result.labels(), "type": point_type_codes(result), "group": result.group_labels()}
-    write_points_ply(path, pts, fields=fields, colors=point_colors(result, "segment", pts))
+    ours: dict[str, np.ndarray] = {}
+    if getattr(result, "normals", None) is not None:
+        ours.update(nx=result.normals[:, 0], ny=result.normals[:, 1], nz=result.normals[:, 2])
+    if getattr(result, "distances", None) is not None:
+        ours["distance"] = result.distances
+        sigma = (result.options.get("derived") or {}).get("sigma")
+        if sigma:
+            ours["distance_sigma"] = result.distances / sigma
+    ours.update(segment=result.labels(), type=point_type_codes(result), group=result.group_labels())
+    reserved = set(ours) | {"x", "y", "z", "red", "green", "blue"}
+    theirs = {(f"input_{k}" if k.lower() in reserved else k): v for k, v in (extra or {}).items()
+              if k.isidentifier() and np.asarray(v).shape == (len(pts),)}
+    write_points_ply(path, pts, fields={**theirs, **ours}, colors=point_colors(result, "segment", pts))
 
 
 def write_trace_ply(path: str | os.PathLike[str], points: np.ndarray, seg: Any, pass_name: str) -> None:
