@@ -39,6 +39,13 @@ class NoisePolicy:
     cluster_families_first : bool
         The families voted per cluster (cone, torus) join the whole-cloud
         round: a slice of a cone by a simpler family fits within the noise.
+    absorb_after_recognition : bool
+        Leftover points join their neighbours' segments right after the
+        whole-cloud round. On exact samples that takes the rows of small
+        faces tangent to large ones before the splitting phase can see them
+        (ablation: +0.0013 mean DSC on Fit4CAD without it, +0.003 on the
+        clean synthetic parts); under noise it gathers the scatter about the
+        large faces (−0.013 on the parts at σ = 0.5 % without it).
     absorb_within_tau : bool
         Leftover points join a segment within τ of it, not ε (6 σ is another
         surface's band).
@@ -66,6 +73,7 @@ class NoisePolicy:
     compete_above_noise: bool
     floor_selection: bool
     cluster_families_first: bool
+    absorb_after_recognition: bool
     absorb_within_tau: bool
     strict_cover: bool
     revote_cluster_families: bool
@@ -78,8 +86,8 @@ class NoisePolicy:
         return self.name == "noisy"
 
 
-CLEAN = NoisePolicy("clean", *([False] * 11))
-NOISY = NoisePolicy("noisy", *([True] * 11))
+CLEAN = NoisePolicy("clean", *([False] * 12))
+NOISY = NoisePolicy("noisy", *([True] * 12))
 
 
 def choose(noise: str, sigma: float, spacing: float) -> NoisePolicy:

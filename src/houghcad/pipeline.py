@@ -54,6 +54,10 @@ def _shared_edges(ctx: Context) -> bool:
     return not ctx.policy.nearest_edges
 
 
+def _absorb_after_recognition(ctx: Context) -> bool:
+    return ctx.policy.absorb_after_recognition
+
+
 # ---------------------------------------------------------------------------- the passes
 
 def recognition(seg: Segmentation, run: Run) -> Segmentation:
@@ -164,7 +168,7 @@ ASSOCIATION = Pass("association", association, PAPER_5_4)
 
 #: The passes in order. Association comes last: it reads the final segments.
 PIPELINE: tuple[Pass, ...] = (
-    Pass("recognition", recognition, PAPER_5_2, after=(ABSORB,)),
+    Pass("recognition", recognition, PAPER_5_2, after=(replace(ABSORB, when=_absorb_after_recognition),)),
     Pass("splitting", splitting, PAPER_5_3),
     Pass("consolidation", consolidation, EXTENSION, after=(ABSORB,)),
     Pass("dissolve_redundant", dissolve_pass, EXTENSION),
