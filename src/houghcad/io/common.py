@@ -23,6 +23,27 @@ Reader = Callable[[bytes, str], Parsed]
 #: Bytes of a file's start that format detection looks at.
 SNIFF_BYTES = 4096
 
+#: Longest parser message quoted in an error (the rest is cut).
+MAX_DETAIL = 160
+#: Digits of a header count quoted in an error.
+MAX_COUNT_DIGITS = 24
+
+
+def count_text(count: int) -> str:
+    """A count read from a header, for a message: absurd ones (thousands of digits) stay short."""
+    text = str(count)
+    if len(text) <= MAX_COUNT_DIGITS:
+        return text
+    return f"{text[:MAX_COUNT_DIGITS]}... ({len(text)} digits)"
+
+
+def one_line(exc: BaseException) -> str:
+    """A (third-party) exception's message as one short line; its type name when it has none."""
+    words = " ".join(str(exc).split())
+    if len(words) > MAX_DETAIL:
+        return words[:MAX_DETAIL] + " ..."
+    return words or type(exc).__name__
+
 
 def decode_text(data: bytes, source: str) -> str:
     """Bytes to str for the text formats; binary content is an InputError."""

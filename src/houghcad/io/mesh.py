@@ -14,7 +14,7 @@ import re
 import numpy as np
 
 from ..errors import InputError
-from .common import SNIFF_BYTES, Parsed, decode_text, first_word, is_float
+from .common import SNIFF_BYTES, Parsed, count_text, decode_text, first_word, is_float
 
 _OFF_KEYWORD = re.compile(r"(ST)?C?N?OFF")
 _OBJ_KEYWORDS = frozenset({"v", "vn", "vt", "vp", "f", "l", "p", "o", "g", "s", "mtllib", "usemtl"})
@@ -123,7 +123,8 @@ def read_off(data: bytes, source: str) -> Parsed:
         raise InputError(f"{source}: no points")
     vertex_rows = content[k:k + n_vertices]
     if len(vertex_rows) < n_vertices:
-        raise InputError(f"{source}: OFF header announces {n_vertices} vertices, file has {len(vertex_rows)}")
+        raise InputError(f"{source}: OFF header announces {count_text(n_vertices)} vertices, "
+                         f"file has {len(vertex_rows)}")
     has_normals = "N" in keyword.replace("OFF", "")
     rows = [s for _, s in vertex_rows]
     usecols = [0, 1, 2, 3, 4, 5] if has_normals else [0, 1, 2]

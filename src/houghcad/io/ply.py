@@ -8,11 +8,12 @@ numeric scalar properties are kept as the cloud's ``fields``.
 from __future__ import annotations
 
 import io
+import warnings
 
 import numpy as np
 
 from ..errors import InputError
-from .common import Parsed
+from .common import Parsed, count_text, one_line
 
 
 def is_ply(head: bytes, ext: str) -> bool:
@@ -20,15 +21,57 @@ def is_ply(head: bytes, ext: str) -> bool:
     return head.startswith(b"ply") and head[3:4] in (b"\n", b"\r")
 
 
+def _check_counts(ply_data: type, data: bytes, source: str) -> None:
+    """Fail fast when the header announces more rows than the body can hold.
+
+    plyfile allocates the announced rows before reading them and loops over them one by one in
+    binary files, so ``element vertex 1000000000000`` would allocate terabytes, and an element
+    without properties would loop (nearly) forever on a few bytes. Every ascii row takes at
+    least a line, every binary row at least its fixed-size properties and list lengths (and is
+    counted as one byte when it has none).
+    """
+    from plyfile import PlyListProperty
+
+    parse_header = getattr(ply_data, "_parse_header", None)  # plyfile's own header parser
+    if parse_header is None:
+        return
+    stream = io.BytesIO(data)
+    header = parse_header(stream)  # raises on a malformed header (reported by the caller)
+    body = data[stream.tell():]
+    if header.text:
+        room, unit = body.count(b"\n") + body.count(b"\r") + 1, "lines"
+    else:
+        room, unit = len(body), "bytes"
+    needed = 0
+    for element in header.elements:
+        if element.count < 0:
+            raise InputError(f"{source}: PLY element {element.name[:40]!r} has a negative count "
+                             f"({count_text(element.count)})")
+        if header.text:
+            row = 1
+        else:
+            row = sum(np.dtype(p.list_dtype()[0] if isinstance(p, PlyListProperty) else p.dtype()).itemsize
+                      for p in element.properties)
+        needed += element.count * max(1, row)
+        if needed > room:
+            raise InputError(f"{source}: PLY header announces {count_text(element.count)} "
+                             f"{element.name[:40]!r} elements, "
+                             f"more than the file's {room} {unit} of data can hold")
+
+
 def read_ply(data: bytes, source: str) -> Parsed:
     """PLY via plyfile; the vertex element's x, y, z (and nx, ny, nz)."""
     from plyfile import PlyData
 
     try:
-        ply = PlyData.read(io.BytesIO(data))
+        _check_counts(PlyData, data, source)
+        with warnings.catch_warnings():  # e.g. numpy's "input contained no data" on an empty ascii list
+            warnings.simplefilter("ignore")
+            ply = PlyData.read(io.BytesIO(data))
+    except InputError:
+        raise
     except Exception as exc:  # plyfile raises assorted types on malformed files
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InputError(f"{source}: cannot parse PLY file ({msg})") from None
+        raise InputError(f"{source}: cannot parse PLY file ({one_line(exc)})") from None
     elements = {el.name: el for el in ply.elements}
     vertex = elements.get("vertex")
     if vertex is None:

@@ -183,8 +183,11 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None) -> PointCl
         fmt = fmt.lower().lstrip(".")
         if fmt not in FORMATS:
             raise InputError(f"{source}: unknown format {fmt!r} (expected one of {', '.join(FORMATS)})")
-    parsed = _BY_NAME[fmt].read(data, source)
-    points, normals = validate_points(parsed[0], source, parsed[1], return_normals=True)
+    # Arbitrary bytes make arbitrary floats (signalling NaNs, overflowing casts): NaN and inf are
+    # reported by validate_points, not as numpy warnings on stderr.
+    with np.errstate(all="ignore"):
+        parsed = _BY_NAME[fmt].read(data, source)
+        points, normals = validate_points(parsed[0], source, parsed[1], return_normals=True)
     fields = dict(parsed[2]) if len(parsed) > 2 else {}
     return PointCloud(points=points, normals=normals, source=source, fields=fields)
 
@@ -256,7 +259,8 @@ def validate_points(
         raise InputError(f"{name}: non-numeric point coordinates (dtype {pts.dtype})")
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise InputError(f"{name}: expected an (N, 3) array of points, got shape {pts.shape}")
-    pts = np.ascontiguousarray(pts, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):  # float128 beyond float64: inf, reported below
+        pts = np.ascontiguousarray(pts, dtype=np.float64)
     n = pts.shape[0]
 
     finite = np.isfinite(pts).all(axis=1)
@@ -287,13 +291,20 @@ def clean_normals(normals: np.ndarray | None, n_points: int) -> np.ndarray | Non
     nrm = np.asarray(normals)
     if nrm.dtype.kind not in "iuf" or nrm.shape != (n_points, 3):
         return None
-    nrm = nrm.astype(np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):  # float128 beyond float64: inf, dropped below
+        nrm = nrm.astype(np.float64)
     if not np.isfinite(nrm).all():
         return None
-    length = np.linalg.norm(nrm, axis=1)
-    if (length < 1e-12).any():
+    # Each row scaled by its largest component first: squares of components near the float64
+    # limit would overflow (a zero "unit" normal), those of tiny ones underflow.
+    scale = np.abs(nrm).max(axis=1)
+    if (scale == 0.0).any():
         return None
-    return np.ascontiguousarray(nrm / length[:, None])
+    unit = nrm / scale[:, None]
+    length = np.linalg.norm(unit, axis=1)  # in [1, sqrt(3)]
+    if (scale < 1e-12 / length).any():  # the normal's own length below 1e-12
+        return None
+    return np.ascontiguousarray(unit / length[:, None])
 
 
 # --------------------------------------------------------------------------- helpers
@@ -324,7 +335,10 @@ def _degeneracy(pts: np.ndarray) -> str | None:
     # whose singular values say nothing (50 copies of 0.1 read as collinear).
     if (pts == pts[0]).all():
         return "all points are identical"
-    centred = pts - pts.mean(axis=0)
+    # Scaled to [-1, 1] first: near the float64 limit the sums, differences and LAPACK's own
+    # squares would overflow (to a wrong answer and a LAPACK complaint on stderr).
+    scaled = pts / np.abs(pts).max()
+    centred = scaled - scaled.mean(axis=0)
     s = np.linalg.svd(centred, compute_uv=False)  # descending, shape (3,)
     if s[0] == 0.0:
         return "all points are identical"
