@@ -313,6 +313,19 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return str(v)
 
 
+#: The dataset of the on-paper projection: clouds and workers.
+PROJECTED_CLOUDS, PROJECTED_WORKERS = 10_000, 16
+
+
+def _projection(s: dict[str, Any]) -> str:
+    """Expected wall time of PROJECTED_CLOUDS such clouds on PROJECTED_WORKERS workers, from this
+    run's worker-seconds per cloud (wall time × workers / clouds: start-up and idle tails included)."""
+    per_cloud = s["wall_seconds"] * s["jobs"] / max(1, s["n_clouds"])
+    hours = PROJECTED_CLOUDS * per_cloud / PROJECTED_WORKERS / 3600.0
+    return (f"{per_cloud:.2f} worker-seconds per cloud, so {PROJECTED_CLOUDS:,} such clouds on "
+            f"{PROJECTED_WORKERS} workers would take about {hours:.1f} h")
+
+
 def summary_text(s: dict[str, Any]) -> str:
     """Plain-text summary for stderr."""
     lines = [
@@ -327,7 +340,7 @@ def summary_text(s: dict[str, Any]) -> str:
         f"peak memory: max {_fmt(s['peak_mb_max'], 0)} MB",
     ]
     if "wall_seconds" in s:
-        lines.append(f"wall time: {_fmt(s['wall_seconds'], 1)} s with {s['jobs']} worker(s)")
+        lines.append(f"wall time: {_fmt(s['wall_seconds'], 1)} s with {s['jobs']} worker(s); {_projection(s)}")
     if "DSC_nomerge_mean" in s:
         lines.append(_merge_line(s))
     return "\n".join(lines)
@@ -389,7 +402,7 @@ def section_markdown(
         w(f"Wall time of the run: {_fmt(s['wall_seconds'], 1)} s on {s['jobs']} worker process(es) of the batch "
           "engine (houghcad.engine: one Dask worker per job, started once). Peak memory per cloud: the worker "
           "process's peak RSS while it ran that cloud (reset when the cloud starts), the worker's resident "
-          "baseline (interpreter, libraries, compiled code) included.\n\n")
+          f"baseline (interpreter, libraries, compiled code) included. On paper: {_projection(s)}.\n\n")
     if "DSC_nomerge_mean" in s:
         w("DSC is measured on the faces of the output: the connected parts of each maximal primitive "
           "(Fit4CAD's ground truth is one segment per CAD face). ")

@@ -325,3 +325,28 @@ def test_scheduler_address_runs_on_its_workers_and_a_given_client_stays_open(das
         assert [r.status for r in rows] == ["ok"] and client.status == "running"
         assert len(client.scheduler_info()["workers"]) == 1
     assert _result(tmp_path / "api" / "part2_segments.json") == _result(first / "part2_segments.json")
+
+
+# --------------------------------------------------------------------------- interrupted
+
+
+def test_interrupting_leaves_whole_outputs_and_the_summary_of_the_finished_clouds(clouds: Path, tmp_path: Path):
+    import signal
+
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "houghcad", "batch", str(clouds), "-o", str(out), "--workers", "1"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    for line in proc.stderr:  # one line per cloud: stop after the second
+        if line.startswith("[2/6]"):
+            break
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130 and stderr.endswith("houghcad: interrupted\n") and "Traceback" not in stderr
+    rows, _ = _summary(out)
+    assert 2 <= len(rows) < 6 and all(r["status"] in ("ok", "error") for r in rows)
+    for result in out.glob("*_segments.json"):
+        assert json.loads(result.read_text())["n_points"] == N_POINTS
+    assert not [p for p in os.listdir(out) if p.endswith(".tmp")]
+    code, stdout, _ = _run(["batch", str(clouds), "-o", str(out), "--workers", "1"])  # the re-run completes it
+    rows, _ = _summary(out)
+    assert code == 1 and len(rows) == 6 and all(r["n_segments"] for r in rows if r["status"] != "error")

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import glob
+import json
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -216,6 +217,17 @@ def _up_to_date(job: CloudJob) -> bool:
         return False
 
 
+def _counts(job: CloudJob) -> dict[str, int]:
+    """Points, segments and unsegmented points of a result that no summary lists (its batch was
+    interrupted as the cloud finished)."""
+    try:
+        data = json.loads(job.output_path("json").read_text(encoding="utf-8"))
+        return {"n_points": int(data["n_points"]), "n_segments": len(data["segments"]),
+                "unsegmented": len(data["unsegmented"])}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+
+
 def plan(inputs: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[str], options: SegmentOptions,
          outputs: Sequence[str] = (), *, force: bool = False,
          previous: dict[str, BatchRow] | None = None) -> list[tuple[CloudJob, BatchRow | None]]:
@@ -240,7 +252,7 @@ def plan(inputs: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[st
         if not force and _up_to_date(job):
             before = (previous or {}).get(display)
             carried = {f.name: getattr(before, f.name) for f in fields(BatchRow)
-                       if f.name not in ("input", "status", "error", "outputs")} if before else {}
+                       if f.name not in ("input", "status", "error", "outputs")} if before else _counts(job)
             skipped = BatchRow(display, "skipped", outputs=tuple(job.output_path(k).name for k in kinds), **carried)
         planned.append((job, skipped))
     return planned
