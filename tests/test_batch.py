@@ -350,3 +350,38 @@ def test_interrupting_leaves_whole_outputs_and_the_summary_of_the_finished_cloud
     code, stdout, _ = _run(["batch", str(clouds), "-o", str(out), "--workers", "1"])  # the re-run completes it
     rows, _ = _summary(out)
     assert code == 1 and len(rows) == 6 and all(r["n_segments"] for r in rows if r["status"] != "error")
+
+
+# --------------------------------------------------------------------------- families defined in a file
+
+FAMILY_FILE = '''
+import sympy as sp
+import houghcad
+
+u, v, k, h = sp.symbols("u v k h")
+houghcad.define_family("batch_paraboloid", x=u * sp.cos(v), y=u * sp.sin(v), z=k * u**2 + h,
+                       params=[k, h], u_range=None, v_range=(0, 2 * sp.pi), lengths={"k": -1, "h": 1},
+                       bounds={"k": (-8, 8), "h": (-1, 1)}, placement="axis")
+'''
+
+
+def test_a_family_file_is_loaded_on_the_workers_and_left_out_of_the_registry(tmp_path: Path):
+    from houghcad.families import REGISTRY
+
+    rng = np.random.default_rng(2)
+    pts, _ = synth.sample_parametric(lambda u, v: u * np.cos(v), lambda u, v: u * np.sin(v),
+                                     lambda u, v: 0.6 * u**2, (0, 1.0), (0, 2 * np.pi), 1500, rng)
+    np.savetxt(tmp_path / "bowl.xyz", pts @ synth.random_rotation(rng).T * 3.0)
+    (tmp_path / "fams.py").write_text(FAMILY_FILE)
+    options = ["--family-file", str(tmp_path / "fams.py"), "--families", "plane,batch_paraboloid"]
+    code, _, stderr = _run(["batch", str(tmp_path / "bowl.xyz"), "-o", str(tmp_path / "out"), "--workers", "1",
+                            *options])
+    assert code == 0, stderr
+    assert "batch_paraboloid" not in REGISTRY  # checking the options did not leave it registered here
+    result = _result(tmp_path / "out" / "bowl_segments.json")
+    assert max(result["segments"], key=lambda s: len(s["indices"]))["type"] == "batch_paraboloid"
+    try:
+        assert main(["segment", str(tmp_path / "bowl.xyz"), "-o", str(tmp_path / "seg.json"), "-q", *options]) == 0
+    finally:
+        REGISTRY.pop("batch_paraboloid", None)
+    assert result == _result(tmp_path / "seg.json")

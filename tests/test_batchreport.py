@@ -55,3 +55,38 @@ def test_index_escapes_links_relative_and_shows_only_known_measures():
     assert "<th>DSC</th>" in page and 'data-v="0.9"' in page
     plain = index_html([ROWS[2]])
     assert "DSC" not in plain and "report" not in plain.split("<tbody>")[0].split("<table id")[1]
+
+
+def test_clicking_a_header_sorts_the_rows_in_headless_chromium(tmp_path: Path):
+    import shutil
+    import tempfile
+
+    for exe in ("/usr/bin/chromium", "/usr/bin/chromedriver"):
+        if not os.access(exe, os.X_OK):
+            pytest.skip(f"{exe} not installed (Debian packages chromium and chromium-driver; .ci/run installs them)")
+    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium not installed (pip install '.[test]')")
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.by import By
+
+    write_summary(tmp_path, ROWS, ["report"])
+    profile = tempfile.mkdtemp(prefix="houghcad-chromium-")
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = "/usr/bin/chromium"  # never let selenium look for (or download) a browser
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run", f"--user-data-dir={profile}",
+                "--disable-background-networking", "--disable-component-update", "--disable-extensions"):
+        opts.add_argument(arg)
+    driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=opts)
+    try:
+        driver.get((tmp_path / "index.html").as_uri())
+        first_column = lambda: [td.text for td in driver.find_elements(By.CSS_SELECTOR, "#rows tbody td:first-child")]
+        header = {th.text: th for th in driver.find_elements(By.CSS_SELECTOR, "#rows th")}
+        header["DSC"].click()  # ascending, blanks last
+        assert first_column() == ["a/p2.txt", "a/p3.txt", "a/p1.txt", "b/x <&> y.ply"]
+        header["DSC"].click()  # descending
+        assert first_column()[:3] == ["a/p1.txt", "a/p3.txt", "a/p2.txt"]
+        header["n_points"].click()  # numbers as numbers: 500 before 1000
+        assert first_column()[:3] == ["a/p3.txt", "a/p1.txt", "b/x <&> y.ply"]
+        assert driver.get_log("browser") == []  # no script error
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)

@@ -417,7 +417,6 @@ def batch(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out
         An input names nothing, two inputs share a stem, a bad option, an unusable ``out_dir``.
     """
     from . import batchreport
-    from .engine import Engine
 
     opts = _options(options)
     outputs = [k for k, on in (("fit4cad", fit4cad), ("ply", ply), ("png", png), ("report", report)) if on]
@@ -426,15 +425,16 @@ def batch(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out
         raise InputError(f"{out}: cannot write outputs (not a folder)")
     planned = plan([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs, out, opts, outputs,
                    force=force, previous=batchreport.read_summary(out))
-    batchreport.make_out_dir(out)  # after the checks: a refused batch leaves nothing behind
     rows: dict[int, BatchRow] = {i: row for i, (_, row) in enumerate(planned) if row is not None}
     todo = [i for i, (_, row) in enumerate(planned) if row is None]
     if not todo:  # nothing to run: no cluster to start
+        batchreport.make_out_dir(out)
         if progress is not None:
             progress.begin(len(planned), list(rows.values()), None)
         batchreport.write_summary(out, [rows[i] for i in range(len(planned))], outputs)
         return [rows[i] for i in range(len(planned))]
-    with _engine(Engine, client, scheduler, workers, retries, timeout) as engine:
+    with _engine(client, scheduler, workers, retries, timeout) as engine:
+        batchreport.make_out_dir(out)  # now: a batch refused or unable to start leaves nothing behind
         if progress is not None:
             progress.begin(len(planned), list(rows.values()), engine.dashboard_link)
         try:
@@ -448,11 +448,13 @@ def batch(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out
 
 
 @contextlib.contextmanager
-def _engine(engine_class: type, client: Any, scheduler: str | None, workers: int | None, retries: int,
+def _engine(client: Any, scheduler: str | None, workers: int | None, retries: int,
             timeout: float | None) -> Iterator[Any]:
-    """The engine, with a scheduler that cannot be reached as an InputError."""
+    """The started engine; a scheduler that cannot be reached is an InputError."""
+    from .engine import Engine
+
+    engine = Engine(client, scheduler=scheduler, workers=workers, retries=retries, timeout=timeout)
     try:
-        engine = engine_class(client, scheduler=scheduler, workers=workers, retries=retries, timeout=timeout)
         engine.__enter__()
     except (OSError, TimeoutError) as exc:
         raise InputError(f"{scheduler or 'local cluster'}: cannot start the batch ({exc})") from None

@@ -21,6 +21,7 @@ workers there are, changes nothing in its value.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import queue
@@ -294,11 +295,11 @@ class Engine:
         client, token = self.client, uuid.uuid4().hex[:12]
         events: queue.SimpleQueue = queue.SimpleQueue()
         client.subscribe_topic(TOPIC, lambda ev: events.put(ev[1]))
-        running: dict[str, _Running] = {}
-        for i, item in enumerate(items):
-            key = f"houghcad-{token}-{i}"
-            running[key] = _Running(i, client.submit(_run_item, func, item, key=key, retries=self.retries,
-                                                     pure=False))
+        keys = [f"houghcad-{token}-{i}" for i in range(len(items))]
+        # One map, one message to the scheduler, however many items.
+        futures = client.map(functools.partial(_run_item, func), items, key=keys, retries=self.retries, pure=False)
+        running = {f.key: _Running(i, f) for i, f in enumerate(futures)}
+        del futures
         done = as_completed([r.future for r in running.values()])
         outcomes: dict[int, Outcome] = {}
         try:
