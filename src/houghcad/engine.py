@@ -229,6 +229,7 @@ class Engine:
         self.retries = retries
         self.timeout = timeout
         self._stack: contextlib.ExitStack | None = None
+        self._local = False  # a local cluster started here: its nannies log in this process
         self._codes = _ExitCodes()
 
     # ----------------------------------------------------------------- lifecycle
@@ -253,6 +254,7 @@ class Engine:
                     n_workers=self.workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
                     host="127.0.0.1", dashboard_address="127.0.0.1:8787"))
                 self.client = stack.enter_context(Client(cluster))
+                self._local = True
         except BaseException:
             stack.close()
             raise
@@ -262,7 +264,7 @@ class Engine:
     def __exit__(self, *exc: Any) -> None:
         if self._stack is not None:
             stack, self._stack = self._stack, None
-            self.client = None
+            self.client, self._local = None, False
             stack.close()
 
     @property
@@ -363,7 +365,7 @@ class Engine:
     def _death_message(self, state: _Running) -> str:
         """``worker died (exit code N)``; the code is known on a local cluster the engine started."""
         pid = state.pids[-1] if state.pids else None
-        deadline = time.monotonic() + (EXIT_CODE_WAIT if self._stack is not None else 0.0)
+        deadline = time.monotonic() + (EXIT_CODE_WAIT if self._local else 0.0)
         while pid is not None and pid not in self._codes.codes and time.monotonic() < deadline:
             time.sleep(POLL)  # the nanny may log the exit just after the scheduler gave up
         code = self._codes.codes.get(pid) if pid is not None else None
