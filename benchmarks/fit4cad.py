@@ -7,9 +7,12 @@ Usage::
         [--families simple] [--jobs 1] [--timeout 600] [--no-write] [--out DIR_OR_CSV]
         [--label NAME]
 
-Every cloud ``PCn.txt`` that has a ``PCn_primitives.txt`` beside it is segmented in its own fresh
-(spawned) process, so the peak RSS reported is that cloud's alone and a crash, a hang or an
-out-of-memory kill costs one row, not the run. A failed cloud scores 0 on every measure.
+Every cloud ``PCn.txt`` that has a ``PCn_primitives.txt`` beside it is segmented on houghcad's
+batch engine (:mod:`houghcad.engine`, the one behind ``houghcad batch``): a local Dask cluster of
+``--jobs`` single-threaded worker processes, so start-up is paid once per worker. A crash, a hang
+(``--timeout``) or an out-of-memory kill costs one row, not the run; a failed cloud scores 0 on
+every measure. The peak RSS of a cloud is its worker's while it ran that cloud (the peak is reset
+when a cloud starts), the worker's resident baseline included.
 
 Unless ``--no-write``: the summary and a per-cloud table replace (or append) the section between
 ``<!-- fit4cad:LABEL:begin -->`` and ``<!-- fit4cad:LABEL:end -->`` of ``BENCHMARKS.md`` at the
@@ -28,12 +31,9 @@ import importlib
 import importlib.metadata
 import io
 import math
-import multiprocessing as mp
-import multiprocessing.connection as mpc
 import os
 import platform
 import re
-import resource
 import shlex
 import sys
 import tempfile
@@ -112,6 +112,14 @@ def failure_row(name: str, error: str, **known: Any) -> dict[str, Any]:
     return row
 
 
+def _peak_mb() -> float:
+    """Peak RSS of this process in MiB: since the engine's task started when run by the engine
+    (VmHWM, reset per cloud), else since the process started."""
+    from houghcad.engine import peak_rss_mb
+
+    return peak_rss_mb()
+
+
 def process_cloud(
     name: str,
     cloud_path: Path,
@@ -166,7 +174,7 @@ def process_cloud(
         faces = result.faces() if hasattr(result, "faces") else [s.indices for s in result.segments]
         pred = [np.asarray(f, dtype=np.int64) for f in faces]
         m = classification_measures(pred, gt, n)
-        peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        peak_mb = _peak_mb()
         row = {c: None for c in COLUMNS}
         row.update(
             name=name, n_points=n, n_gt=len(gt), n_pred=len(pred), DSC_nomerge=dsc_raw,
@@ -177,31 +185,18 @@ def process_cloud(
     except Exception as exc:  # one failing cloud must not stop the run
         if t0 is not None and "seconds" not in known:
             known["seconds"] = time.perf_counter() - t0
-        known["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        known["peak_mb"] = _peak_mb()
         where = traceback.extract_tb(exc.__traceback__)[-1]
         msg = f"{type(exc).__name__}: {exc} ({Path(where.filename).name}:{where.lineno})"
         return failure_row(name, msg, **known)
 
 
-def _child_main(conn: mpc.Connection, args: tuple) -> None:
-    """Entry point of a spawned worker: one cloud, then exit (fresh process per cloud)."""
-    try:
-        row = process_cloud(*args, on_loaded=lambda n, g: conn.send(("loaded", n, g)))
-        conn.send(("row", row))
-    except BaseException as exc:  # e.g. MemoryError raised outside process_cloud's guard
-        conn.send(("row", failure_row(args[0], f"{type(exc).__name__}: {exc}")))
-    finally:
-        conn.close()
+def _cloud_task(args: tuple) -> dict[str, Any]:
+    """The task run by a batch-engine worker: one cloud; what it learns early (points, ground-truth
+    segments) goes to the client at once, so that a cloud whose worker dies keeps it."""
+    from houghcad.engine import report
 
-
-def _peak_rss_mb(pid: int) -> float | None:
-    """VmHWM of a live process from /proc (Linux), so a timed-out child still reports memory."""
-    try:
-        text = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return None
-    m = re.search(r"^VmHWM:\s+(\d+)\s+kB", text, re.MULTILINE)
-    return int(m.group(1)) / 1024.0 if m else None
+    return process_cloud(*args, on_loaded=lambda n, g: report("loaded", n_points=n, n_gt=g))
 
 
 def run_clouds(
@@ -211,79 +206,54 @@ def run_clouds(
     timeout: float = 600.0,
     segmenter: str = DEFAULT_SEGMENTER,
     progress: Callable[[int, int, dict[str, Any]], None] | None = None,
+    client: Any = None,
 ) -> list[dict[str, Any]]:
-    """Run every cloud in its own spawned process, at most *jobs* at once.
+    """Run every cloud on the batch engine (:class:`houghcad.engine.Engine`): a local Dask cluster
+    of *jobs* single-threaded worker processes, started once, so that start-up (imports, compiled
+    code) is paid once per worker, not once per cloud.
 
     Parameters
     ----------
     clouds : list of (name, cloud_path, primitives_path)
     timeout : float
-        Seconds a child may live (import, read, segment, evaluate); it is killed after that.
+        Seconds a cloud may run on its worker (read, segment, evaluate); past that it is cancelled
+        and its worker restarted.
     progress : callable(done, total, row), optional
         Called as each cloud finishes.
+    client : distributed.Client, optional
+        Run on this cluster instead of starting one (*jobs* is then ignored).
 
     Returns
     -------
     list of row dicts, in the order of *clouds* (deterministic whatever the completion order).
+    A cloud gets one attempt: a worker that dies (a crash in native code, an out-of-memory kill)
+    or a timeout costs one row, not the run. ``peak_mb`` is the worker process's peak RSS while it
+    ran the cloud (reset when the cloud starts), its resident baseline included.
     """
-    ctx = mp.get_context("spawn")  # fresh interpreter per cloud: no inherited memory or state
-    pending = list(enumerate(clouds))[::-1]
-    running: dict[int, dict[str, Any]] = {}
+    from houghcad.engine import Engine
+
+    known: dict[int, dict[str, Any]] = {i: {} for i in range(len(clouds))}
     rows: dict[int, dict[str, Any]] = {}
-    try:
-        while pending or running:
-            while pending and len(running) < max(1, jobs):
-                i, (name, cloud, gt) = pending.pop()
-                recv, send = ctx.Pipe(duplex=False)
-                proc = ctx.Process(
-                    target=_child_main,
-                    args=(send, (name, cloud, gt, families, segmenter)),
-                    name=f"fit4cad-{name}",
-                    daemon=False,  # the pipeline may start processes of its own
-                )
-                proc.start()
-                send.close()  # parent keeps only the read end: EOF when the child dies
-                running[i] = {"proc": proc, "conn": recv, "start": time.monotonic(),
-                              "name": name, "known": {}}
-            now = time.monotonic()
-            wait_for = min(st["start"] + timeout for st in running.values()) - now
-            ready = mpc.wait([st["conn"] for st in running.values()], timeout=max(0.0, wait_for))
-            finished: list[tuple[int, dict[str, Any]]] = []
-            for i, st in list(running.items()):
-                row = None
-                if st["conn"] in ready:
-                    try:
-                        msg = st["conn"].recv()
-                    except EOFError:
-                        st["proc"].join(5)
-                        code = st["proc"].exitcode
-                        hint = " (SIGKILL: out of memory?)" if code == -9 else ""
-                        row = failure_row(st["name"], f"worker died (exit code {code}){hint}", **st["known"])
-                    else:
-                        if msg[0] == "loaded":
-                            st["known"].update(n_points=msg[1], n_gt=msg[2])
-                        else:
-                            row = msg[1]
-                if row is None and time.monotonic() - st["start"] >= timeout:
-                    peak = _peak_rss_mb(st["proc"].pid)
-                    st["proc"].kill()
-                    row = failure_row(
-                        st["name"], f"timeout after {timeout:g} s",
-                        seconds=float(timeout), peak_mb=peak, **st["known"],
-                    )
-                if row is not None:
-                    st["proc"].join(10)
-                    st["conn"].close()
-                    finished.append((i, row))
-            for i, row in finished:
-                del running[i]
-                rows[i] = row
-                if progress is not None:
-                    progress(len(rows), len(clouds), row)
-    finally:
-        for st in running.values():  # interrupted: leave no orphan worker behind
-            st["proc"].kill()
-            st["proc"].join(5)
+
+    def on_event(i: int, event: dict[str, Any]) -> None:
+        if event.get("kind") == "loaded":
+            known[i].update(n_points=event["n_points"], n_gt=event["n_gt"])
+
+    def on_outcome(o: Any) -> None:
+        name = clouds[o.index][0]
+        if o.status == "done":
+            row = o.value
+            row["peak_mb"] = o.peak_mb if o.peak_mb is not None else row["peak_mb"]
+        else:
+            extra = {"seconds": float(timeout)} if o.status == "timeout" else {}
+            row = failure_row(name, o.error or o.status, **extra, **known[o.index])
+        rows[o.index] = row
+        if progress is not None:
+            progress(len(rows), len(clouds), row)
+
+    items = [(name, cloud, gt, families, segmenter) for name, cloud, gt in clouds]
+    with Engine(client, workers=None if client is not None else max(1, jobs), retries=0, timeout=timeout) as engine:
+        engine.run(_cloud_task, items, on_event=on_event, on_outcome=on_outcome)
     return [rows[i] for i in range(len(clouds))]
 
 
@@ -343,6 +313,19 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return str(v)
 
 
+#: The dataset of the on-paper projection: clouds and workers.
+PROJECTED_CLOUDS, PROJECTED_WORKERS = 10_000, 16
+
+
+def _projection(s: dict[str, Any]) -> str:
+    """Expected wall time of PROJECTED_CLOUDS such clouds on PROJECTED_WORKERS workers, from this
+    run's worker-seconds per cloud (wall time × workers / clouds: start-up and idle tails included)."""
+    per_cloud = s["wall_seconds"] * s["jobs"] / max(1, s["n_clouds"])
+    hours = PROJECTED_CLOUDS * per_cloud / PROJECTED_WORKERS / 3600.0
+    return (f"{per_cloud:.2f} worker-seconds per cloud, so {PROJECTED_CLOUDS:,} such clouds on "
+            f"{PROJECTED_WORKERS} workers would take about {hours:.1f} h")
+
+
 def summary_text(s: dict[str, Any]) -> str:
     """Plain-text summary for stderr."""
     lines = [
@@ -356,6 +339,8 @@ def summary_text(s: dict[str, Any]) -> str:
         ),
         f"peak memory: max {_fmt(s['peak_mb_max'], 0)} MB",
     ]
+    if "wall_seconds" in s:
+        lines.append(f"wall time: {_fmt(s['wall_seconds'], 1)} s with {s['jobs']} worker(s); {_projection(s)}")
     if "DSC_nomerge_mean" in s:
         lines.append(_merge_line(s))
     return "\n".join(lines)
@@ -413,6 +398,11 @@ def section_markdown(
     w(f"| time per cloud (s, segment call, successful clouds) | {_fmt(s['seconds_mean'], 2)} | "
       f"{_fmt(s['seconds_median'], 2)} | {_fmt(s['seconds_max'], 2)} |\n")
     w(f"| peak memory per cloud (MB, whole worker) | | | {_fmt(s['peak_mb_max'], 0)} |\n\n")
+    if "wall_seconds" in s:
+        w(f"Wall time of the run: {_fmt(s['wall_seconds'], 1)} s on {s['jobs']} worker process(es) of the batch "
+          "engine (houghcad.engine: one Dask worker per job, started once). Peak memory per cloud: the worker "
+          "process's peak RSS while it ran that cloud (reset when the cloud starts), the worker's resident "
+          f"baseline (interpreter, libraries, compiled code) included. On paper: {_projection(s)}.\n\n")
     if "DSC_nomerge_mean" in s:
         w("DSC is measured on the faces of the output: the connected parts of each maximal primitive "
           "(Fit4CAD's ground truth is one segment per CAD face). ")
@@ -548,14 +538,14 @@ def rows_csv(rows: list[dict[str, Any]]) -> str:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="fit4cad.py",
-        description="Benchmark houghcad on Fit4CAD clouds (one fresh process per cloud).",
+        description="Benchmark houghcad on Fit4CAD clouds (on houghcad's batch engine, --jobs workers).",
     )
     p.add_argument("dir", type=Path, help="folder with PCn.txt and PCn_primitives.txt files")
     p.add_argument("--limit", type=int, default=None, help="only the first N clouds")
     p.add_argument("--names", default=None, help="comma-separated cloud names, e.g. PC1,PC2")
     p.add_argument("--families", default="simple",
                    help="passed to segment(families=...): a preset name or a comma-separated list")
-    p.add_argument("--jobs", type=int, default=1, help="clouds run at once (default 1)")
+    p.add_argument("--jobs", type=int, default=1, help="worker processes, clouds run at once (default 1)")
     p.add_argument("--timeout", type=float, default=600.0, help="seconds per cloud (default 600)")
     p.add_argument("--no-write", action="store_true",
                    help="do not update BENCHMARKS.md, docs/benchmark-log.md nor the default CSV")
@@ -601,8 +591,11 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr, flush=True)
 
     date = _now()
+    t0 = time.perf_counter()
     rows = run_clouds(clouds, args.families, args.jobs, args.timeout, args.segmenter, progress)
     s = summarize(rows)
+    s["wall_seconds"] = time.perf_counter() - t0
+    s["jobs"] = args.jobs
     print(summary_text(s), file=sys.stderr)
 
     if not args.no_write or args.out is not None:

@@ -246,3 +246,11 @@ def test_real_pipeline_meets_dsc_floor():
     table = "\n".join(f"{r['name']}: DSC {r['DSC']:.3f} {r['error'] or ''}" for r in rows)
     mean_dsc = float(np.mean([r["DSC"] for r in rows]))
     assert mean_dsc >= DSC_FLOOR, f"mean DSC {mean_dsc:.3f} < {DSC_FLOOR}\n{table}"
+
+
+def test_summary_gives_wall_time_and_the_projection_to_a_large_dataset():
+    rows = [bench.failure_row("PC1", "x", n_gt=3), bench.failure_row("PC2", "y", n_gt=2)]
+    s = bench.summarize(rows) | {"wall_seconds": 10.0, "jobs": 2}
+    expected = "10.00 worker-seconds per cloud, so 10,000 such clouds on 16 workers would take about 1.7 h"
+    assert expected in bench.summary_text(s) and "wall time: 10.0 s with 2 worker(s)" in bench.summary_text(s)
+    assert expected in bench.section_markdown("t", rows, s, "python x", "2024-01-01", "m")

@@ -5,10 +5,14 @@ from __future__ import annotations
 from .errors import InputError
 from .result import Result, Segment
 
+# Imported now (standard library only, cheap) so that the name ``houghcad.batch`` is the
+# function: the submodule of that name stays reachable by ``from houghcad.batch import ...``.
+from .batch import BatchRow, batch
+
 __version__ = "0.1.0"
 
 __all__ = ["InputError", "Result", "Segment", "segment", "Segmenter", "read_points", "define_family", "Tolerances",
-           "__version__"]
+           "batch", "BatchRow", "__version__"]
 
 
 def __getattr__(name: str):

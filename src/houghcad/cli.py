@@ -1,4 +1,4 @@
-"""Command-line interface: ``houghcad segment | demo | evaluate``.
+"""Command-line interface: ``houghcad segment | demo | evaluate | batch`` (batch: :mod:`.batchcli`).
 
 Exit codes: 0 success, 2 bad input or usage (one line on stderr, prefixed
 ``houghcad: error:``, no traceback), 130 interrupted.  Any other exception is
@@ -87,8 +87,51 @@ def _positive_int(text: str) -> int:
 # --------------------------------------------------------------------------- parser
 
 
+def add_segment_options(p: argparse.ArgumentParser) -> None:
+    """The options that shape a result, shared by ``segment`` and ``batch``."""
+    p.add_argument("--families", default="simple", metavar="LIST",
+                   help="'simple', 'all' or comma-separated names, e.g. plane,cylinder (default: simple)")
+    p.add_argument("--family-file", action="append", default=[], metavar="FILE.py",
+                   help="run a Python file that defines families with houghcad.define_family before segmenting "
+                   "(repeatable; it runs unsandboxed: only files you trust); name them in --families")
+    p.add_argument("--epsilon", type=_fraction, default=None, metavar="F",
+                   help="distance tolerance as a fraction of the bounding-box diagonal, below 0.5 "
+                   "(default: from the point spacing and the estimated noise)")
+    p.add_argument("--seed", type=_seed, default=0, metavar="N", help="random seed (default: 0)")
+    p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
+                   help="normals: 'auto' uses the file's normals if any, else PCA (creases voted on clean clouds, "
+                   "64 neighbours on noisy ones); 'pca' and 'voting' always estimate them (default: auto)")
+    p.add_argument("--no-merge", action="store_true",
+                   help="keep segments lying on one surface apart instead of merging them into one "
+                   "maximal primitive (groups are found either way)")
+    p.add_argument("--noise", choices=("auto", "clean", "noisy"), default="auto",
+                   help="noise policy: 'auto' reads the cloud as noisy when its estimated noise is at least 0.15 "
+                   "point spacings; 'clean' and 'noisy' force it (default: auto)")
+    p.add_argument("--persistence", type=_open_fraction, default=None, metavar="F",
+                   help="peak persistence threshold, a fraction of the accumulator's maximum in (0, 1) (default: 0.1)")
+    p.add_argument("--min-points", type=_positive_int, default=None, metavar="N",
+                   help="smallest segment in points (default: max(8, points / 5000))")
+    p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
+                   help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
+                   "docs/tolerances.md lists them")
+
+
+def segment_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """Keyword arguments of :func:`_run_segmentation` from the options of
+    :func:`add_segment_options` (a bad ``--tolerance`` is an InputError)."""
+    kwargs: dict[str, Any] = {"families": args.families, "epsilon": args.epsilon, "seed": args.seed,
+                              "normals_method": args.normals, "merge": not args.no_merge, "noise": args.noise}
+    if args.persistence is not None:
+        kwargs["persistence"] = args.persistence
+    if args.min_points is not None:
+        kwargs["min_points"] = args.min_points
+    if args.tolerance:
+        kwargs["tolerances"] = _tolerances(args.tolerance)
+    return kwargs
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The ``houghcad`` argument parser with its three subcommands."""
+    """The ``houghcad`` argument parser with its subcommands."""
     parser = _Parser(
         prog=PROG,
         description="Recognise planes, cylinders, cones, spheres and tori in 3-D point clouds "
@@ -103,18 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input", metavar="INPUT", help="point-cloud file")
     p.add_argument("-o", "--output", metavar="RESULT.json",
                    help="result file (default: <input stem>_segments.json in the current directory)")
-    p.add_argument("--families", default="simple", metavar="LIST",
-                   help="'simple', 'all' or comma-separated names, e.g. plane,cylinder (default: simple)")
-    p.add_argument("--family-file", action="append", default=[], metavar="FILE.py",
-                   help="run a Python file that defines families with houghcad.define_family before segmenting "
-                   "(repeatable; it runs unsandboxed: only files you trust); name them in --families")
-    p.add_argument("--epsilon", type=_fraction, default=None, metavar="F",
-                   help="distance tolerance as a fraction of the bounding-box diagonal, below 0.5 "
-                   "(default: from the point spacing and the estimated noise)")
-    p.add_argument("--seed", type=_seed, default=0, metavar="N", help="random seed (default: 0)")
-    p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
-                   help="normals: 'auto' uses the file's normals if any, else PCA (creases voted on clean clouds, "
-                   "64 neighbours on noisy ones); 'pca' and 'voting' always estimate them (default: auto)")
+    add_segment_options(p)
     p.add_argument("--fit4cad", metavar="DIR",
                    help="also write DIR/<input stem>_primitives.txt in the Fit4CAD ground-truth format")
     p.add_argument("--ply", metavar="OUT.ply",
@@ -123,19 +155,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--png", metavar="OUT.png", help="also draw four views coloured by type and by segment")
     p.add_argument("--report", metavar="OUT.html",
                    help="also write a self-contained HTML report: interactive 3-D view, tables, timings")
-    p.add_argument("--no-merge", action="store_true",
-                   help="keep segments lying on one surface apart instead of merging them into one "
-                   "maximal primitive (groups are found either way)")
-    p.add_argument("--noise", choices=("auto", "clean", "noisy"), default="auto",
-                   help="noise policy: 'auto' reads the cloud as noisy when its estimated noise is at least 0.15 "
-                   "point spacings; 'clean' and 'noisy' force it (default: auto)")
-    p.add_argument("--persistence", type=_open_fraction, default=None, metavar="F",
-                   help="peak persistence threshold, a fraction of the accumulator's maximum in (0, 1) (default: 0.1)")
-    p.add_argument("--min-points", type=_positive_int, default=None, metavar="N",
-                   help="smallest segment in points (default: max(8, points / 5000))")
-    p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
-                   help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
-                   "docs/tolerances.md lists them")
     p.add_argument("--trace", metavar="DIR",
                    help="also write the labels after every pass of the pipeline, one PLY per pass named "
                    "NN_PASS.ply, to see where a cloud goes wrong (DIR is created if needed)")
@@ -158,6 +177,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="NAME_primitives.txt, or the cloud file NAME.txt/.ply/... next to it")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=_cmd_evaluate)
+
+    from .batchcli import add_batch_parser  # late: batchcli uses this module's helpers
+
+    add_batch_parser(sub)
     return parser
 
 
@@ -349,7 +372,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 
         _load_family_files(args.family_file)
         select(args.families)  # unknown names fail now, not after reading the cloud
-    tolerances = _tolerances(args.tolerance) if args.tolerance else None
+    _tolerances(args.tolerance)  # a bad one fails before the cloud is read
     cloud = read_points(inp)
     _check_output(out, [inp])
     if prim is not None:
@@ -364,19 +387,10 @@ def _cmd_segment(args: argparse.Namespace) -> int:
         _check_output(path, [inp])
         taken.append(path)
 
-    extra: dict[str, Any] = {"noise": args.noise}
-    if args.persistence is not None:
-        extra["persistence"] = args.persistence
-    if args.min_points is not None:
-        extra["min_points"] = args.min_points
-    if tolerances:
-        extra["tolerances"] = tolerances
+    kwargs = segment_kwargs(args)
     if args.trace:
-        extra["trace"] = _trace_writer(Path(args.trace), cloud.points)
-    result = _run_segmentation(
-        cloud, families=args.families, epsilon=args.epsilon, seed=args.seed, normals_method=args.normals,
-        quiet=args.quiet, merge=not args.no_merge, **extra,
-    )
+        kwargs["trace"] = _trace_writer(Path(args.trace), cloud.points)
+    result = _run_segmentation(cloud, quiet=args.quiet, **kwargs)
     _write(out, write_json, result.to_dict())
     written = [out]
     if prim is not None:

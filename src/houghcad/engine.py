@@ -1,0 +1,397 @@
+"""One function over many items on a Dask cluster: the engine of ``houghcad batch``.
+
+:class:`Engine` starts a local ``dask.distributed`` cluster (one single-threaded worker process
+per core) or connects to a running scheduler, submits one task per item and collects how each
+ended as an :class:`Outcome`, in the items' order whatever the completion order. Dask does the
+scheduling; this module adds what a batch of long, independent tasks needs on top of it:
+
+- tasks that raise are retried (``retries=`` of ``Client.submit``); a worker that dies mid-task
+  has its task rescheduled on another worker by the scheduler (``allowed-failures``, set to
+  ``retries`` on the clusters the engine starts), and past that the item ends ``died``;
+- a task running longer than ``timeout`` seconds is cancelled and its worker restarted (a thread
+  cannot be stopped): the item ends ``timeout``;
+- tasks tell the client when they start and, through :func:`report`, anything else (Dask's
+  structured events), so a progress display knows what is running;
+- the peak resident memory of each task (its worker's, reset when the task starts).
+
+Determinism: each task is a pure function of its item; which worker runs it, and how many
+workers there are, changes nothing in its value.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import logging
+import os
+import queue
+import re
+import resource
+import time
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["Engine", "Outcome", "report", "peak_rss_mb", "reset_peak_rss"]
+
+#: Dask event topic of the engine's messages (task start, and what tasks report).
+TOPIC = "houghcad-engine"
+#: Seconds between two looks at the futures and events when nothing happened.
+POLL = 0.05
+#: Seconds to wait for a worker's exit code after its task was declared dead.
+EXIT_CODE_WAIT = 2.0
+#: Seconds a worker restarted after a timeout may take to come back.
+RESTART_TIMEOUT = 30.0
+_DEATH = re.compile(r"Worker process (\d+) (?:exited with status|was killed by signal) (\d+)")
+
+
+@dataclass
+class Outcome:
+    """How one item ended.
+
+    Attributes
+    ----------
+    index : int
+        Position of the item in the sequence given to :meth:`Engine.run`.
+    status : str
+        ``"done"`` (``value`` holds the return value), ``"failed"`` (the task raised on every
+        attempt), ``"died"`` (its worker died on every attempt), ``"timeout"`` or ``"cancelled"``.
+    value : Any
+        The task's return value when ``done``.
+    error : str or None
+        One line saying what went wrong.
+    attempts : int
+        Times a worker started the task (more than 1 after a retry).
+    worker : str or None
+        Address of the worker that ran the last attempt.
+    peak_mb : float or None
+        Peak resident memory (MiB) of the worker process while it ran the task; includes the
+        worker's own baseline. None when unknown (the task did not finish).
+    peak_scope : str
+        ``"task"`` when the peak was reset at the task's start (Linux), ``"worker"`` when it is
+        the worker's lifetime peak.
+    """
+
+    index: int
+    status: str
+    value: Any = None
+    error: str | None = None
+    attempts: int = 0
+    worker: str | None = None
+    peak_mb: float | None = None
+    peak_scope: str = "task"
+
+
+# --------------------------------------------------------------------------- inside a task
+
+
+def reset_peak_rss() -> bool:
+    """Reset this process's peak resident set size (Linux ``clear_refs`` 5); False if impossible."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process in MiB since the last :func:`reset_peak_rss`
+    (``VmHWM``), else since it started (``ru_maxrss``, KiB on Linux)."""
+    with contextlib.suppress(OSError, AttributeError):
+        with open("/proc/self/status") as fh:
+            found = re.search(r"^VmHWM:\s+(\d+)\s+kB", fh.read(), re.MULTILINE)
+        if found:
+            return int(found.group(1)) / 1024.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _message(kind: str, data: dict[str, Any]) -> tuple[Any, dict[str, Any]] | None:
+    """This worker and the event about its running task; None outside a worker."""
+    try:
+        from distributed import get_worker
+
+        worker = get_worker()
+    except (ImportError, ValueError):  # called directly, not as a task
+        return None
+    return worker, {"kind": kind, "key": worker.get_current_task(), "pid": os.getpid(), "worker": worker.address,
+                    **data}
+
+
+def report(kind: str, **data: Any) -> None:
+    """Send ``data`` (plain values) about the running task to the client, as a Dask event; the
+    client hands it to ``Engine.run(on_event=...)``. Delivered to the scheduler before it returns
+    (the task may die next); does nothing outside a worker."""
+    found = _message(kind, data)
+    if found is not None:
+        from distributed import get_client
+
+        get_client().log_event(TOPIC, found[1])
+
+
+def _run_item(func: Callable[[Any], Any], item: Any) -> tuple[Any, float, str]:
+    """The task: ``func(item)``, announced to the client, with its peak memory."""
+    scope = "task" if reset_peak_rss() else "worker"
+    found = _message("start", {})
+    if found is not None:
+        found[0].log_event(TOPIC, found[1])  # batched: no round trip
+    value = func(item)
+    return value, peak_rss_mb(), scope
+
+
+# --------------------------------------------------------------------------- client side
+
+
+class _ExitCodes(logging.Handler):
+    """Collects ``pid -> exit code`` of the worker processes that the nannies of a local cluster
+    (in this process) saw die; Dask says it only in its log."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.codes: dict[int, int] = {}
+
+    def emit(self, record: logging.LogRecord) -> None:
+        found = _DEATH.search(record.getMessage())
+        if found:
+            code = int(found.group(2))
+            self.codes[int(found.group(1))] = -code if "signal" in record.getMessage() else code
+
+
+@contextlib.contextmanager
+def _quiet_dask_logs(codes: _ExitCodes) -> Iterator[None]:
+    """Dask's warnings (a restarted worker, a cancelled task) off stderr while a cluster that
+    the engine started runs, in this process and in its workers; the nannies' exit codes are kept."""
+    dist, nanny = logging.getLogger("distributed"), logging.getLogger("distributed.nanny")
+    saved = dist.level, nanny.level, nanny.propagate, os.environ.get("DASK_LOGGING__DISTRIBUTED")
+    dist.setLevel(logging.ERROR)
+    nanny.setLevel(logging.INFO)
+    nanny.propagate = False
+    nanny.addHandler(codes)
+    os.environ["DASK_LOGGING__DISTRIBUTED"] = "error"  # read by the spawned workers
+    try:
+        yield
+    finally:
+        nanny.removeHandler(codes)
+        dist.setLevel(saved[0])
+        nanny.setLevel(saved[1])
+        nanny.propagate = saved[2]
+        if saved[3] is None:
+            os.environ.pop("DASK_LOGGING__DISTRIBUTED", None)
+        else:
+            os.environ["DASK_LOGGING__DISTRIBUTED"] = saved[3]
+
+
+@dataclass
+class _Running:
+    """What the client knows of one submitted item."""
+
+    index: int
+    future: Any
+    started: float | None = None  # time.monotonic() of the last start event
+    attempts: int = 0
+    pids: list[int] = field(default_factory=list)
+    worker: str | None = None
+
+
+class Engine:
+    """Runs a function over items on a Dask cluster (context manager).
+
+    Parameters
+    ----------
+    client : distributed.Client, optional
+        Use this client's cluster; the engine neither configures nor closes it.
+    workers : int, optional
+        Worker processes of the local cluster started when neither ``client`` nor ``scheduler``
+        is given (default: the number of cores). Each has one thread.
+    scheduler : str, optional
+        Address of a running scheduler (``tcp://host:port``) whose workers run the tasks; the
+        items must name files that those workers can reach.
+    retries : int
+        Extra attempts of a task that raises, and, on a cluster the engine starts, of a task whose
+        worker dies (Dask's ``allowed-failures``); an external scheduler keeps its own setting.
+    timeout : float, optional
+        Seconds one task may run (from its start on a worker) before it is cancelled and its
+        worker restarted.
+    """
+
+    def __init__(self, client: Any = None, *, workers: int | None = None, scheduler: str | None = None,
+                 retries: int = 2, timeout: float | None = None) -> None:
+        if client is not None and scheduler is not None:
+            raise ValueError("give a client or a scheduler address, not both")
+        if workers is not None and workers < 1:
+            raise ValueError(f"workers must be >= 1, got {workers}")
+        if retries < 0:
+            raise ValueError(f"retries must be >= 0, got {retries}")
+        self.client = client
+        self.workers = workers
+        self.scheduler = scheduler
+        self.retries = retries
+        self.timeout = timeout
+        self._stack: contextlib.ExitStack | None = None
+        self._local = False  # a local cluster started here: its nannies log in this process
+        self._codes = _ExitCodes()
+
+    # ----------------------------------------------------------------- lifecycle
+
+    def __enter__(self) -> Engine:
+        import dask
+        from distributed import Client, LocalCluster
+
+        if self.client is not None:
+            return self
+        stack = contextlib.ExitStack()
+        try:
+            if self.scheduler is not None:
+                self.client = stack.enter_context(Client(self.scheduler, timeout="10s"))
+            else:
+                stack.enter_context(_quiet_dask_logs(self._codes))
+                # One task per single-threaded worker at a time (saturation 1.0): a worker
+                # restarted after a timeout holds no other task.
+                stack.enter_context(dask.config.set({"distributed.scheduler.allowed-failures": self.retries,
+                                                     "distributed.scheduler.worker-saturation": 1.0}))
+                cluster = stack.enter_context(LocalCluster(
+                    n_workers=self.workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                    host="127.0.0.1", dashboard_address="127.0.0.1:8787"))
+                self.client = stack.enter_context(Client(cluster))
+                self._local = True
+        except BaseException:
+            stack.close()
+            raise
+        self._stack = stack
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self._stack is not None:
+            stack, self._stack = self._stack, None
+            self.client, self._local = None, False
+            stack.close()
+
+    @property
+    def dashboard_link(self) -> str | None:
+        """Address of the Dask dashboard (a page served only when bokeh is installed)."""
+        return getattr(self.client, "dashboard_link", None)
+
+    @property
+    def n_workers(self) -> int:
+        """Workers connected now."""
+        return len(self.client.scheduler_info().get("workers", {}))
+
+    # ----------------------------------------------------------------- running
+
+    def run(self, func: Callable[[Any], Any], items: Sequence[Any], *,
+            on_event: Callable[[int, dict[str, Any]], None] | None = None,
+            on_outcome: Callable[[Outcome], None] | None = None) -> list[Outcome]:
+        """Run ``func(item)`` for every item; returns one :class:`Outcome` per item, in order.
+
+        ``func`` and the items must pickle (``func`` by reference: a module-level function of
+        a module the workers can import). ``on_event(index, event)`` gets every event of an
+        item's task (``event["kind"]`` is ``"start"`` or what the task passed to :func:`report`),
+        ``on_outcome`` each outcome as it comes. On an interruption the remaining tasks are
+        cancelled.
+        """
+        if self.client is None:
+            raise RuntimeError("Engine.run outside its 'with' block")
+        from distributed import as_completed
+
+        client, token = self.client, uuid.uuid4().hex[:12]
+        events: queue.SimpleQueue = queue.SimpleQueue()
+        client.subscribe_topic(TOPIC, lambda ev: events.put(ev[1]))
+        keys = [f"houghcad-{token}-{i}" for i in range(len(items))]
+        # One map, one message to the scheduler, however many items.
+        futures = client.map(functools.partial(_run_item, func), items, key=keys, retries=self.retries, pure=False)
+        running = {f.key: _Running(i, f) for i, f in enumerate(futures)}
+        del futures
+        done = as_completed([r.future for r in running.values()])
+        outcomes: dict[int, Outcome] = {}
+        try:
+            while running:
+                busy = self._take_events(events, running, on_event)
+                for future in done.next_batch(block=False) if done.has_ready() else []:
+                    state = running.pop(future.key, None)
+                    if state is not None:
+                        self._finish(self._outcome(state, future), outcomes, on_outcome)
+                    future.release()  # its result would be recomputed if its worker died later
+                    busy = True
+                busy |= self._expire(running, outcomes, on_outcome)
+                if not busy:
+                    time.sleep(POLL)
+        finally:
+            client.unsubscribe_topic(TOPIC)
+            if running:  # interrupted
+                client.cancel([r.future for r in running.values()])
+        return [outcomes[i] for i in range(len(items))]
+
+    @staticmethod
+    def _finish(outcome: Outcome, outcomes: dict[int, Outcome], on_outcome: Callable | None) -> None:
+        outcomes[outcome.index] = outcome
+        if on_outcome is not None:
+            on_outcome(outcome)
+
+    @staticmethod
+    def _take_events(events: queue.SimpleQueue, running: dict[str, _Running],
+                     on_event: Callable[[int, dict[str, Any]], None] | None) -> bool:
+        """Apply the events received since the last call; True if there were any."""
+        got = False
+        while True:
+            try:
+                event = events.get_nowait()
+            except queue.Empty:
+                return got
+            got = True
+            state = running.get(event.get("key"))
+            if state is None:  # another run's task, or one already finished
+                continue
+            if event.get("kind") == "start":
+                state.started, state.worker = time.monotonic(), event.get("worker")
+                state.attempts += 1
+                state.pids.append(int(event.get("pid", -1)))
+            if on_event is not None:
+                on_event(state.index, event)
+
+    def _outcome(self, state: _Running, future: Any) -> Outcome:
+        """The outcome of a finished (or erred, or cancelled) future."""
+        base = {"index": state.index, "attempts": max(1, state.attempts), "worker": state.worker}
+        if future.status == "finished":
+            value, peak, scope = future.result()
+            return Outcome(status="done", value=value, peak_mb=peak, peak_scope=scope, **base)
+        if future.status == "cancelled":
+            return Outcome(status="cancelled", error="cancelled", **base)
+        exc = future.exception()
+        if type(exc).__name__ == "KilledWorker":
+            return Outcome(status="died", error=self._death_message(state), **base)
+        return Outcome(status="failed", error=_one_line(f"{type(exc).__name__}: {exc}"), **base)
+
+    def _death_message(self, state: _Running) -> str:
+        """``worker died (exit code N)``; the code is known on a local cluster the engine started."""
+        pid = state.pids[-1] if state.pids else None
+        deadline = time.monotonic() + (EXIT_CODE_WAIT if self._local else 0.0)
+        while pid is not None and pid not in self._codes.codes and time.monotonic() < deadline:
+            time.sleep(POLL)  # the nanny may log the exit just after the scheduler gave up
+        code = self._codes.codes.get(pid) if pid is not None else None
+        times = f" {state.attempts} times" if state.attempts > 1 else ""
+        if code is None:
+            return f"worker died{times}"
+        hint = " (SIGKILL: out of memory?)" if code == -9 else ""
+        return f"worker died{times} (exit code {code}){hint}"
+
+    def _expire(self, running: dict[str, _Running], outcomes: dict[int, Outcome],
+                on_outcome: Callable | None) -> bool:
+        """Cancel the tasks past their time and restart their workers; True if any."""
+        if self.timeout is None:
+            return False
+        now = time.monotonic()
+        late = [(k, s) for k, s in running.items() if s.started is not None and now - s.started >= self.timeout]
+        for key, state in late:
+            del running[key]
+            self.client.cancel([state.future])
+            if state.worker is not None:
+                self.client.restart_workers([state.worker], timeout=RESTART_TIMEOUT, raise_for_error=False)
+            self._finish(Outcome(state.index, "timeout", error=f"timeout after {self.timeout:g} s",
+                                 attempts=state.attempts, worker=state.worker, peak_mb=None), outcomes, on_outcome)
+        return bool(late)
+
+
+def _one_line(text: str, limit: int = 500) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
