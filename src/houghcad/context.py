@@ -85,13 +85,15 @@ def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: No
     """The run's scales from the point spacing and the estimated noise.
 
     ``epsilon``: the removal distance as a fraction of the diagonal (None:
-    ``tol.scale.epsilon_taus`` × τ); ``min_points``: the smallest segment
+    ``tol.scale.epsilon_taus`` × τ, or ``noisy_epsilon_taus`` × τ under the
+    noisy policy); ``min_points``: the smallest segment
     (None: from the number of points).
     """
     t = tol.scale
     s = pre.spacing
     tau = max(t.tau_spacings * s, t.tau_sigmas * pre.noise)
-    eps = t.epsilon_taus * tau if epsilon is None else float(epsilon) * pre.diagonal
+    eps_taus = t.noisy_epsilon_taus if policy.wide_removal else t.epsilon_taus
+    eps = eps_taus * tau if epsilon is None else float(epsilon) * pre.diagonal
     tau = min(tau, eps)
     angle = np.radians(min(t.angle_max_deg, t.angle_deg + t.angle_deg_per_noise * pre.noise / max(s, _TINY)))
     mp = min_points if min_points is not None else max(t.min_points_floor, n_points // t.points_per_min_point)

@@ -383,11 +383,12 @@ class Segmenter:
         ctx = run.ctx
         options = {**self.get_options(), "merge": bool(run.associator.merge), "tolerances": ctx.tol.to_dict(),
                    "normals_used": ctx.pre.normals_method,
-                   "derived": {"noise_policy": ctx.policy.name, "sigma": ctx.pre.noise / ctx.pre.transform.scale,
-                               "spacing": ctx.spacing / ctx.pre.transform.scale,
-                               "tau": ctx.tau / ctx.pre.transform.scale,
-                               "epsilon": ctx.epsilon / ctx.pre.transform.scale,
-                               "link": ctx.link / ctx.pre.transform.scale,
+                   "derived": {"noise_policy": ctx.policy.name,
+                               "sigma": float(ctx.pre.noise / ctx.pre.transform.scale),
+                               "spacing": float(ctx.spacing / ctx.pre.transform.scale),
+                               "tau": float(ctx.tau / ctx.pre.transform.scale),
+                               "epsilon": float(ctx.epsilon / ctx.pre.transform.scale),
+                               "link": float(ctx.link / ctx.pre.transform.scale),
                                "angle_deg": float(np.degrees(ctx.angle)), "min_points": ctx.min_points}}
         unsegmented = np.flatnonzero(seg.labels < 0).astype(np.int64)
         return Result(n_points=len(points), segments=out, unsegmented=unsegmented, timing=timing,
