@@ -142,6 +142,44 @@ def _houghcad_ply(pts, nrm, *, binary: bool) -> bytes:
         return path.read_bytes()
 
 
+def _las_bytes(pts, nrm, *, compressed: bool) -> bytes:
+    import laspy
+
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = np.array([1e-6] * 3)
+    header.offsets = pts.min(axis=0)
+    header.add_extra_dims([laspy.ExtraBytesParams(name=k, type=np.float32) for k in ("nx", "ny", "nz")])
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts.T
+    las.nx, las.ny, las.nz = nrm.T.astype(np.float32)
+    las.intensity = np.arange(len(pts), dtype=np.uint16)
+    buf = io.BytesIO()
+    las.write(buf, do_compress=compressed)
+    return buf.getvalue()
+
+
+def _pcd_bytes(pts, nrm, encoding: str) -> bytes:
+    from pypcd4 import Encoding
+    from pypcd4 import PointCloud as Pcd
+
+    arr = np.hstack([pts, nrm]).astype(np.float32)
+    cloud = Pcd.from_points(arr, ["x", "y", "z", "normal_x", "normal_y", "normal_z"], [np.float32] * 6)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "seed.pcd"
+        cloud.save(str(path), encoding=Encoding(encoding))
+        return path.read_bytes()
+
+
+def _e57_bytes(pts) -> bytes:
+    import pye57
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "seed.e57"
+        with contextlib.closing(pye57.E57(str(path), mode="w")) as e57:
+            e57.write_scan_raw({"cartesianX": pts[:, 0], "cartesianY": pts[:, 1], "cartesianZ": pts[:, 2]})
+        return path.read_bytes()
+
+
 @cache
 def seeds() -> dict[str, tuple[str, bytes]]:
     """Seed name -> (extension, bytes): small valid files of every format (30 to 120 points)."""
@@ -177,12 +215,19 @@ def seeds() -> dict[str, tuple[str, bytes]]:
         "noff": (".off", _text(["NOFF 45 0 0"] + _rows(p45, n45))),
         "stl_ascii": (".stl", _stl_ascii(p45)),
         "stl_binary": (".stl", _stl_binary(p120)),
+        "las": (".las", _las_bytes(p45, n45, compressed=False)),
+        "laz": (".laz", _las_bytes(p60, n60, compressed=True)),
+        "pcd_ascii": (".pcd", _pcd_bytes(p30, n30, "ascii")),
+        "pcd_binary": (".pcd", _pcd_bytes(p45, n45, "binary")),
+        "pcd_binary_compressed": (".pcd", _pcd_bytes(p60, n60, "binary_compressed")),
+        "e57": (".e57", _e57_bytes(p45)),
     }
 
 
 SEED_NAMES = tuple(seeds())
 BINARY_SEEDS = frozenset({"ply_binary", "ply_binary_be_faces", "npy_f8", "npy_f4_normals", "npy_structured",
-                          "npy_int_fortran", "stl_binary"})
+                          "npy_int_fortran", "stl_binary", "las", "laz", "pcd_binary",
+                          "pcd_binary_compressed", "e57"})
 
 
 # --------------------------------------------------------------------------- mutations
@@ -212,6 +257,7 @@ _PLY_FORMAT = re.compile(rb"format (ascii|binary_little_endian|binary_big_endian
 _NPY_SHAPE = re.compile(rb"'shape': \((\d+),(?: (\d+))?")
 _OFF_COUNTS = re.compile(rb"(\A\s*[A-Z]*OFF\s+)(\d+)")
 _FIRST_INT = re.compile(rb"\d+")
+_PCD_COUNT = re.compile(rb"(POINTS|WIDTH|HEIGHT) (-?\d+)")
 
 
 def _pos(draw, data: bytes, *, end: bool = True) -> int:
@@ -278,6 +324,13 @@ def _inflate_count(draw, name, data):
             return data[:m.start(2)] + str(count).encode() + data[m.end(2):]
     if name == "stl_binary" and len(data) >= 84:
         return data[:80] + struct.pack("<I", count % 2 ** 32) + data[84:]
+    if name.startswith("la") and len(data) >= 111:  # LAS legacy point count, or the VLR count
+        at = draw(st.sampled_from([107, 100]))
+        return data[:at] + struct.pack("<I", count % 2 ** 32) + data[at + 4:]
+    if name.startswith("pcd"):
+        m = _PCD_COUNT.search(data)
+        if m:
+            return data[:m.start(2)] + str(count).encode() + data[m.end(2):]
     if name.startswith("npy"):
         m = _NPY_SHAPE.search(data)
         if m:

@@ -301,7 +301,7 @@ def test_explicit_format(tmp_path, cloud):
     path = _table(tmp_path / "points.dat", pts, header="x y z")
     np.testing.assert_array_equal(read_points(path, fmt="xyz").points, pts)
     with pytest.raises(InputError) as e:
-        read_points(path, fmt="las")
+        read_points(path, fmt="bogus")
     _assert_error(path, e, "unknown format")
 
 

@@ -107,6 +107,12 @@ class SegmentOptions:
     tolerances: tuple[tuple[str, float], ...] = ()  # ("stage.name", value) pairs
     merge: bool = True
     family_files: tuple[str, ...] = ()  # absolute paths
+    scan: int | None = None  # E57 only: the scan to read
+    drop_invalid: bool = False  # leave out rows with NaN or inf coordinates
+
+    def read_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`houghcad.io.read_points`."""
+        return {"scan": self.scan, "drop_invalid": self.drop_invalid}
 
     def segment_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`houghcad.cli._run_segmentation`, as ``segment`` passes them."""
@@ -325,7 +331,7 @@ def segment_cloud(job: CloudJob) -> BatchRow:
     t0 = time.perf_counter()
     try:
         with _user_families(job.options.family_files):
-            cloud = read_points(job.path)
+            cloud = read_points(job.path, **job.options.read_kwargs())
             cloud.source = job.display  # what `houghcad segment DISPLAY` records
             result = _run_segmentation(cloud, quiet=True, **job.options.segment_kwargs())
             written = _write_outputs(job, cloud, result)

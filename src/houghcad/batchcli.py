@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .batch import OUTPUT_NAMES, BatchRow
-from .cli import _positive_int, _seed, add_segment_options, segment_kwargs
+from .cli import _positive_int, _seed, add_segment_options, read_kwargs, segment_kwargs
 from .errors import InputError
 
 __all__ = ["add_batch_parser", "Progress"]
@@ -150,7 +150,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         rows = batch(args.inputs, args.output, scheduler=args.scheduler, workers=args.workers,
                      retries=args.retries, timeout=args.timeout, force=args.force, fit4cad=args.fit4cad,
                      ply=args.ply, png=args.png, report=args.report, progress=progress,
-                     family_files=args.family_file, **kwargs)
+                     family_files=args.family_file, **kwargs, **read_kwargs(args))
     finally:
         progress.close()
     counts = {s: sum(r.status == s for r in rows) for s in ("ok", "skipped", "error")}

@@ -114,6 +114,11 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
                    help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
                    "docs/tolerances.md lists them")
+    p.add_argument("--scan", type=_seed, default=None, metavar="K",
+                   help="E57 input: segment scan K only (0-based; default: every scan, merged in the file's frame)")
+    p.add_argument("--drop-invalid", action="store_true",
+                   help="leave out points with a NaN or infinite coordinate (scanners mark missing points so) "
+                   "instead of refusing the file, and say how many")
 
 
 def segment_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -128,6 +133,11 @@ def segment_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     if args.tolerance:
         kwargs["tolerances"] = _tolerances(args.tolerance)
     return kwargs
+
+
+def read_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """Keyword arguments of :func:`houghcad.io.read_points` from :func:`add_segment_options`."""
+    return {"scan": args.scan, "drop_invalid": args.drop_invalid}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -373,7 +383,10 @@ def _cmd_segment(args: argparse.Namespace) -> int:
         _load_family_files(args.family_file)
         select(args.families)  # unknown names fail now, not after reading the cloud
     _tolerances(args.tolerance)  # a bad one fails before the cloud is read
-    cloud = read_points(inp)
+    cloud = read_points(inp, **read_kwargs(args))
+    if cloud.dropped and not args.quiet:
+        print(f"{PROG}: {inp}: left out {cloud.dropped} points with a NaN or infinite coordinate",
+              file=sys.stderr)
     _check_output(out, [inp])
     if prim is not None:
         _check_output(prim, [inp, out], create_parent=True)

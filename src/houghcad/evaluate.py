@@ -25,6 +25,7 @@ from .groundtruth import (
     unit,
 )
 from .io import read_points
+from .io.readers import FORMAT_TABLE
 from .result import Result
 
 __all__ = [
@@ -284,7 +285,7 @@ def parameter_errors(family: str, truth: dict, found: dict, diagonal: float,
 
 
 #: Point-cloud file extensions :func:`ground_truth_for` strips (those of ``houghcad.io.readers``).
-_CLOUD_EXTENSIONS = (".ply", ".xyz", ".txt", ".csv", ".pts", ".asc", ".npy", ".obj", ".off", ".stl")
+_CLOUD_EXTENSIONS = tuple(ext for f in FORMAT_TABLE for ext in f.extensions)
 #: Files beside a cloud that are its ground truth, not the cloud.
 _GT_SUFFIXES = ("_primitives.txt", "_implicit.txt", "_parametric.txt")
 
@@ -293,7 +294,7 @@ def ground_truth_for(path: str | Path) -> Path:
     """Locate the ``_primitives.txt`` ground truth for a point cloud.
 
     Accepts ``NAME_primitives.txt`` itself, the cloud ``NAME.<ext>`` for any point-cloud
-    extension houghcad reads (``.ply .xyz .txt .csv .pts .asc .npy .obj .off .stl``, any case),
+    extension houghcad reads (``.ply .xyz .txt .csv .pts .asc .npy .obj .off .stl .las .laz .e57 .pcd``, any case),
     a sibling ``NAME_implicit.txt`` / ``NAME_parametric.txt``, or the prefix ``.../NAME``; the
     ground truth is ``NAME_primitives.txt`` in the same folder.
     """

@@ -42,7 +42,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import InputError
-from . import mesh, npy, ply, text
+from . import e57, las, mesh, npy, pcd, ply, text
 from .common import SNIFF_BYTES, Reader
 
 __all__ = [
@@ -107,6 +107,9 @@ FORMAT_TABLE: tuple[Format, ...] = (
     Format("off", mesh.read_off, (".off",), magic=mesh.is_off),
     Format("stl", mesh.read_stl, (".stl",), guess=mesh.looks_like_stl, guess_rank=0),
     Format("fit4cad", text.read_fit4cad, magic=text.is_fit4cad),
+    Format("las", las.read_las, (".las", ".laz"), magic=las.is_las),
+    Format("e57", e57.read_e57, (".e57",), magic=e57.is_e57),
+    Format("pcd", pcd.read_pcd, (".pcd",), magic=pcd.is_pcd),
 )
 
 #: Format names accepted by ``read_points(fmt=...)``.
@@ -133,12 +136,15 @@ class PointCloud:
     fields : dict of str to ndarray (N,)
         The file's other per-point attributes (intensity, colour ...), kept
         for the outputs.
+    dropped : int
+        Rows with a NaN or infinite coordinate left out (``drop_invalid``).
     """
 
     points: np.ndarray
     normals: np.ndarray | None = None
     source: str | None = None
     fields: dict[str, np.ndarray] = field(default_factory=dict)
+    dropped: int = 0
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -147,7 +153,8 @@ class PointCloud:
 # --------------------------------------------------------------------------- public API
 
 
-def read_points(path: str | os.PathLike[str], fmt: str | None = None) -> PointCloud:
+def read_points(path: str | os.PathLike[str], fmt: str | None = None, *, scan: int | None = None,
+                drop_invalid: bool = False) -> PointCloud:
     """Read and validate a point cloud.
 
     Parameters
@@ -159,6 +166,12 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None) -> PointCl
         content (PLY/NPY magic, Fit4CAD ``Points:=[``, OFF keyword) and then
         the extension; files with an unknown extension holding a plain numeric
         table are read as XYZ.
+    scan : int, optional
+        E57 only: read this scan (0-based) instead of merging them all.
+    drop_invalid : bool
+        Leave out the rows with a NaN or infinite coordinate (scanners and
+        organised PCD clouds mark missing points so) instead of refusing the
+        file; ``PointCloud.dropped`` says how many.
 
     Returns
     -------
@@ -185,11 +198,34 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None) -> PointCl
             raise InputError(f"{source}: unknown format {fmt!r} (expected one of {', '.join(FORMATS)})")
     # Arbitrary bytes make arbitrary floats (signalling NaNs, overflowing casts): NaN and inf are
     # reported by validate_points, not as numpy warnings on stderr.
+    if scan is not None and fmt != "e57":
+        raise InputError(f"{source}: a scan can be chosen in E57 files only")
     with np.errstate(all="ignore"):
-        parsed = _BY_NAME[fmt].read(data, source)
-        points, normals = validate_points(parsed[0], source, parsed[1], return_normals=True)
-    fields = dict(parsed[2]) if len(parsed) > 2 else {}
-    return PointCloud(points=points, normals=normals, source=source, fields=fields)
+        parsed = _BY_NAME[fmt].read(data, source, scan=scan) if fmt == "e57" else _BY_NAME[fmt].read(data, source)
+        points, normals = parsed[0], parsed[1]
+        fields = dict(parsed[2]) if len(parsed) > 2 else {}
+        dropped = 0
+        if drop_invalid:
+            points, normals, fields, dropped = _drop_invalid(points, normals, fields)
+        points, normals = validate_points(points, source, normals, return_normals=True)
+    return PointCloud(points=points, normals=normals, source=source, fields=fields, dropped=dropped)
+
+
+def _drop_invalid(points: np.ndarray, normals: np.ndarray | None, fields: dict[str, np.ndarray]) \
+        -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray], int]:
+    """The rows whose coordinates are all finite, of the points (N, 3) and of their normals
+    and fields; and how many were left out. Arrays that are not (N, 3) numeric pass as they are
+    (validation reports them)."""
+    pts = np.asarray(points)
+    if pts.ndim != 2 or pts.shape[1] != 3 or pts.dtype.kind not in "iuf":
+        return points, normals, fields, 0
+    keep = np.isfinite(pts.astype(np.float64)).all(axis=1)
+    if keep.all():
+        return points, normals, fields, 0
+    n = len(pts)
+    nrm = np.asarray(normals)[keep] if normals is not None and np.shape(normals)[:1] == (n,) else normals
+    kept = {k: np.asarray(v)[keep] for k, v in fields.items() if np.shape(v)[:1] == (n,)}
+    return pts[keep], nrm, kept, int((~keep).sum())
 
 
 

@@ -1,0 +1,56 @@
+"""PCD reader [``pcd``] (Point Cloud Library files: ascii, binary, binary_compressed; via pypcd4).
+
+The fields ``x, y, z`` are the points; ``normal_x, normal_y, normal_z`` (or
+``nx, ny, nz``) the normals when present; the other scalar fields (intensity,
+rgb ...) are kept as the cloud's ``fields``. Organised clouds mark missing
+points with NaN: such rows are refused unless ``read_points(..., drop_invalid=True)``.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+from ..errors import InputError
+from .common import Parsed, one_line
+
+_NORMALS = (("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz"))
+
+
+def is_pcd(head: bytes, ext: str) -> bool:
+    """A PCD header: comment lines, then ``VERSION`` and ``FIELDS`` lines."""
+    lines = [ln.strip() for ln in head.split(b"\n")[:12]]
+    lines = [ln for ln in lines if ln and not ln.startswith(b"#")]
+    return len(lines) >= 2 and lines[0].startswith(b"VERSION") and lines[1].startswith(b"FIELDS")
+
+
+def read_pcd(data: bytes, source: str) -> Parsed:
+    """PCD via pypcd4: (points, normals or None, fields)."""
+    from pypcd4 import PointCloud
+
+    if not is_pcd(data[:4096], ".pcd"):
+        raise InputError(f"{source}: not a PCD file (expected VERSION and FIELDS header lines)")
+    try:
+        with np.errstate(all="ignore"):
+            pc = PointCloud.from_fileobj(io.BytesIO(data))
+            names = list(pc.fields)
+            table = pc.numpy()
+    except Exception as exc:  # pypcd4 raises assorted types on malformed files
+        raise InputError(f"{source}: cannot parse PCD file ({one_line(exc)})") from None
+    if not all(k in names for k in "xyz"):
+        raise InputError(f"{source}: PCD file lacks x, y, z fields")
+    table = np.asarray(table)
+    if table.ndim != 2 or table.shape[1] != len(names):
+        raise InputError(f"{source}: PCD fields with several values each are not supported")
+    col = {n: table[:, i] for i, n in enumerate(names)}
+    points = np.column_stack([col[k] for k in "xyz"]).astype(np.float64)
+    normals = None
+    used = {"x", "y", "z"}
+    for triple in _NORMALS:
+        if all(n in col for n in triple):
+            normals = np.column_stack([col[n] for n in triple]).astype(np.float64)
+            used |= set(triple)
+            break
+    fields = {n: v for n, v in col.items() if n not in used and n.isidentifier()}
+    return points, normals, fields
