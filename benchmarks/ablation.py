@@ -194,6 +194,17 @@ def _write(path: Path, rows: list[dict]) -> None:
 
 # ------------------------------------------------------------------------------------- report
 
+def _head() -> str:
+    """The repository's current commit (empty outside a git checkout)."""
+    import subprocess
+
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True,
+                              check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+
+
 def summarise(base: list[dict], rows: list[dict]) -> dict:
     """Changes of a variant against the baseline: per fold, overall, synthetic rows, time."""
     b = {r["key"]: r for r in base}
@@ -225,8 +236,10 @@ def table(results: dict[str, list[dict]], order: list[Variant]) -> list[str]:
     lines = [f"Baseline: Fit4CAD mean DSC {np.mean([r['dsc'] for r in f4]):.4f}, folds "
              + ", ".join(f"{x:.4f}" for x in folds) + f"; median time {np.median([r['seconds'] for r in f4]):.2f} s.",
              "",
-             "Changes against the baseline (DSC in thousandths; time in %). `inactive`: the variant cannot "
-             "reach those clouds (noisy-policy or complex-family code on Fit4CAD's clean `simple` run).",
+             "Changes against the baseline (DSC in thousandths; time: median seconds per Fit4CAD cloud, in %; "
+             "variants run at different moments on a shared 2-core machine, so only large time changes mean "
+             "anything). `inactive`: the variant cannot reach those clouds (noisy-policy or complex-family code "
+             "on Fit4CAD's clean `simple` run).",
              "",
              "| variant | fold 0 | fold 1 | fold 2 | fold 3 | fold 4 | mean | time | "
              + " | ".join(syn_cols) + " |",
@@ -253,26 +266,32 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-variants", type=int, default=None, help="compute at most N uncached variants")
     ap.add_argument("--list", action="store_true", help="list the variants and whether they are cached")
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--cache", type=Path, default=CACHE, help="folder of the per-variant CSVs (default %(default)s)")
+    ap.add_argument("--report-only", action="store_true", help="compute nothing: the table of the cached variants")
     a = ap.parse_args(argv)
     order = variants()
-    CACHE.mkdir(parents=True, exist_ok=True)
+    cache = a.cache
+    cache.mkdir(parents=True, exist_ok=True)
+    commit_file = cache / "COMMIT"
+    if not commit_file.exists():  # the code the cached variants were measured on
+        commit_file.write_text(_head() + "\n")
     if a.list:
         for v in order:
-            print(f"{'cached ' if (CACHE / f'{v.name}.csv').exists() else '       '}{v.name}"
+            print(f"{'cached ' if (cache / f'{v.name}.csv').exists() else '       '}{v.name}"
                   f"{'' if v.on_fit4cad else '  (synthetic only)'}")
         return 0
     todo = [v for v in order if v.name == "baseline" or not a.only or
             any(re.search(p, v.name) for p in a.only.split(","))]
-    todo = [v for v in todo if not (CACHE / f"{v.name}.csv").exists()]
+    todo = [v for v in todo if not (cache / f"{v.name}.csv").exists()] if not a.report_only else []
     if a.max_variants is not None:
         todo = todo[: a.max_variants + (1 if todo and todo[0].name == "baseline" else 0)]
     with mp.get_context("spawn").Pool(a.jobs, maxtasksperchild=40) as pool:
         for v in todo:
             t0 = time.perf_counter()
             rows = list(pool.imap(run_task, tasks(v, a.fit4cad), chunksize=1))
-            _write(CACHE / f"{v.name}.csv", rows)
+            _write(cache / f"{v.name}.csv", rows)
             print(f"{v.name}: {len(rows)} cases in {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-    results = {v.name: _read(CACHE / f"{v.name}.csv") for v in order if (CACHE / f"{v.name}.csv").exists()}
+    results = {v.name: _read(cache / f"{v.name}.csv") for v in order if (cache / f"{v.name}.csv").exists()}
     if "baseline" not in results:
         print("no baseline yet", file=sys.stderr)
         return 1
@@ -284,9 +303,10 @@ def main(argv: list[str] | None = None) -> int:
 
         measured = sum(v.name in results for v in order) - 1
         publish_section("ablation", "Ablation", "ablation.py", argv, [
-            f"- {measured} of {len(order) - 1} variants measured; `python benchmarks/ablation.py --list` "
-            "lists them. Each variant: the 188 Fit4CAD training clouds (`simple`, faces scored) and the "
-            "synthetic parts (seeds 0-1, 12000 points).",
+            f"- {measured} of {len(order) - 1} variants measured, on the code of commit "
+            f"`{commit_file.read_text().strip()[:10]}`; `python benchmarks/ablation.py --list` lists them. "
+            "Each variant: the 188 Fit4CAD training clouds (`simple`, faces scored) and the synthetic parts "
+            "(seeds 0-1, 12000 points).",
         ], lines, True)
     return 0
 
