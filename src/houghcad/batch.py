@@ -109,6 +109,8 @@ class SegmentOptions:
     family_files: tuple[str, ...] = ()  # absolute paths
     scan: int | None = None  # E57 only: the scan to read
     drop_invalid: bool = False  # leave out rows with NaN or inf coordinates
+    max_points: int | None = None  # None: the pipeline's default subsample size
+    full_resolution: bool = False
 
     def read_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`houghcad.io.read_points`."""
@@ -124,6 +126,10 @@ class SegmentOptions:
             kw["min_points"] = self.min_points
         if self.tolerances:
             kw["tolerances"] = dict(self.tolerances)
+        if self.max_points is not None:
+            kw["max_points"] = self.max_points
+        if self.full_resolution:
+            kw["full_resolution"] = True
         return kw
 
 

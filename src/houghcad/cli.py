@@ -114,6 +114,11 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
                    help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
                    "docs/tolerances.md lists them")
+    p.add_argument("--max-points", type=_positive_int, default=None, metavar="N",
+                   help="clouds with more points are recognised on an even subsample of at most N points, then "
+                   "every point is labelled from its subsample neighbours (default: 100000; at least 1000)")
+    p.add_argument("--full-resolution", action="store_true",
+                   help="recognise on every point, however many (slow and memory-hungry on big scans)")
     p.add_argument("--scan", type=_seed, default=None, metavar="K",
                    help="E57 input: segment scan K only (0-based; default: every scan, merged in the file's frame)")
     p.add_argument("--drop-invalid", action="store_true",
@@ -132,6 +137,10 @@ def segment_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         kwargs["min_points"] = args.min_points
     if args.tolerance:
         kwargs["tolerances"] = _tolerances(args.tolerance)
+    if args.max_points is not None:
+        kwargs["max_points"] = args.max_points
+    if args.full_resolution:
+        kwargs["full_resolution"] = True
     return kwargs
 
 

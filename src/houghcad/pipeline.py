@@ -26,6 +26,7 @@ from .consolidation import consolidate, prefer_planes, revisit_poor_fits
 from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
 from .errors import InputError
 from .growth import absorb, accept
+from .multires import Subsample, propagate, voxel_subsample
 from .output import build_segments
 from .noise import NOISE_CHOICES, choose
 from .preprocess import preprocess
@@ -44,6 +45,12 @@ MAX_EPSILON = 0.5
 _SPLIT_START = 0.3
 _SPLIT_SPAN = 0.6
 _OUTPUT_AT = 0.96
+_PROPAGATE_AT = 0.93
+#: Clouds above this many points are recognised on an even subsample of this size (our
+#: extension, :mod:`houghcad.multires`); the Fit4CAD clouds (at most 50k points) stay whole.
+DEFAULT_MAX_POINTS = 100_000
+#: A subsample smaller than this no longer holds a mechanical part's small faces.
+MIN_MAX_POINTS = 1000
 
 
 def _nearest_edges(ctx: Context) -> bool:
@@ -191,7 +198,9 @@ class _Saved:
     run: Run
     timing: dict[str, float]
     points: np.ndarray
+    normals: np.ndarray | None
     source: str | None
+    picked: Subsample | None
 
 
 def pass_names() -> list[str]:
@@ -246,6 +255,12 @@ class Segmenter:
     skip : sequence of str
         Names of passes not to run (see :func:`pass_names`; a skipped pass's
         follow-ups are skipped with it), for ablation and debugging.
+    max_points : int or None
+        Clouds with more points are recognised on an even voxel subsample of
+        at most this many points, then every point is labelled from its
+        subsample neighbours (:mod:`houghcad.multires`). None: never.
+    full_resolution : bool
+        Recognise on every point whatever the size (``max_points`` ignored).
 
     Attributes
     ----------
@@ -262,7 +277,8 @@ class Segmenter:
                  progress: Callable[[str, float], None] | None = None, merge: bool = True,
                  association: dict[str, Any] | None = None, trace: str | Path | TraceFn | None = None,
                  check: bool | None = None, noise: str = "auto",
-                 tolerances: Tolerances | dict[str, Any] | None = None, skip: tuple[str, ...] = ()):
+                 tolerances: Tolerances | dict[str, Any] | None = None, skip: tuple[str, ...] = (),
+                 max_points: int | None = DEFAULT_MAX_POINTS, full_resolution: bool = False):
         self.families = families
         self.epsilon = epsilon
         self.normals_method = normals_method
@@ -277,6 +293,8 @@ class Segmenter:
         self.noise = noise
         self.tolerances = tolerances
         self.skip = skip
+        self.max_points = max_points
+        self.full_resolution = full_resolution
 
     def get_options(self) -> dict[str, Any]:
         fams = self.families
@@ -284,7 +302,8 @@ class Segmenter:
                 "epsilon": self.epsilon, "normals_method": self.normals_method,
                 "persistence": self.persistence, "min_points": self.min_points, "seed": self.seed,
                 "merge": bool(self.merge), "association": dict(self.association or {}), "noise": self.noise,
-                "tolerances": self._tolerances().to_dict(), "skip": list(self.skip)}
+                "tolerances": self._tolerances().to_dict(), "skip": list(self.skip),
+                "max_points": self.max_points, "full_resolution": bool(self.full_resolution)}
 
     def tolerances_dict(self) -> dict[str, Any]:
         """``tolerances`` as ``{stage: {name: value}}`` (without the ``association`` options)."""
@@ -334,20 +353,26 @@ class Segmenter:
         report = monotonic(self.progress)
 
         t0 = time.perf_counter()
+        picked = self._subsample(points)
+        timing = {} if picked is None else {"subsample": time.perf_counter() - t0}
+        work, work_normals = (points, normals) if picked is None else \
+            (points[picked.indices], None if normals is None else normals[picked.indices])
+        t0 = time.perf_counter()
         report("preprocess", 0.0)
-        pre = preprocess(points, normals, method=self.normals_method, seed=self.seed, noise=self.noise)
-        ctx = self._context(pre, len(points), tol)
+        pre = preprocess(work, work_normals, method=self.normals_method, seed=self.seed, noise=self.noise)
+        ctx = self._context(pre, len(work), tol)
         run = Run(ctx, fams, voted, associator, report)
-        runner = Runner(run, {"preprocess": time.perf_counter() - t0}, self._tracer(points),
+        runner = Runner(run, {**timing, "preprocess": time.perf_counter() - t0}, self._tracer(work),
                         checks_enabled() if self.check is None else bool(self.check), total=len(PIPELINE),
                         skip=frozenset(skip))
-        seg = Segmentation(len(points))
+        seg = Segmentation(len(work))
         for p in PIPELINE:
             if p is ASSOCIATION:
-                self._before_association = _Saved(seg.copy(), run, dict(runner.timing), points, source)
+                self._before_association = _Saved(seg.copy(), run, dict(runner.timing), points, normals, source,
+                                                  picked)
             seg = runner(p, seg)
         self.context_ = ctx
-        self.result_ = self._result(seg, run, runner.timing, points, source)
+        self.result_ = self._result(seg, run, runner.timing, self._before_association)
         report("done", 1.0)
         return self
 
@@ -357,7 +382,7 @@ class Segmenter:
         if not hasattr(self, "_before_association"):
             raise RuntimeError("call fit() first")
         saved = self._before_association
-        seg, run, timing, points, source = saved.seg, saved.run, saved.timing, saved.points, saved.source
+        seg, run, timing = saved.seg, saved.run, saved.timing
         merge = self.merge if merge is None else merge
         tol = run.ctx.tol
         if association is not None:  # these options replace the Segmenter's association options
@@ -369,10 +394,27 @@ class Segmenter:
         run = replace(run, ctx=replace(run.ctx, tol=tol), associator=self._associator(merge, tol),
                       progress=lambda s, f: None)
         runner = Runner(run, dict(timing))
-        return self._result(runner(ASSOCIATION, seg.copy()), run, runner.timing, points, source)
+        return self._result(runner(ASSOCIATION, seg.copy()), run, runner.timing, saved)
 
-    def _result(self, seg: Segmentation, run: Run, timing: dict[str, float], points: np.ndarray,
-                source: str | None) -> Result:
+    def _subsample(self, points: np.ndarray) -> Subsample | None:
+        """The even subsample recognition runs on, or None to run on every point."""
+        if self.full_resolution or self.max_points is None:
+            return None
+        if isinstance(self.max_points, bool) or int(self.max_points) != self.max_points \
+                or self.max_points < MIN_MAX_POINTS:
+            raise InputError(f"max_points must be a whole number of at least {MIN_MAX_POINTS}, got {self.max_points!r}")
+        if len(points) <= self.max_points:
+            return None
+        return voxel_subsample(points, int(self.max_points), self.seed)
+
+    def _result(self, seg: Segmentation, run: Run, timing: dict[str, float], saved: _Saved) -> Result:
+        points, source, picked = saved.points, saved.source, saved.picked
+        if picked is not None:  # every input point from its subsample neighbours (multires)
+            t = time.perf_counter()
+            run.progress("propagate", _PROPAGATE_AT)
+            full = propagate(seg, run.ctx, picked.indices, points, saved.normals, run.ctx.tol.resolution)
+            seg, run = full.seg, replace(run, ctx=replace(run.ctx, pre=full.pre))
+            timing = {**timing, "propagate": time.perf_counter() - t}
         self.segmentation_ = seg
         t = time.perf_counter()
         run.progress("output", _OUTPUT_AT)
@@ -389,7 +431,9 @@ class Segmenter:
                                "tau": float(ctx.tau / ctx.pre.transform.scale),
                                "epsilon": float(ctx.epsilon / ctx.pre.transform.scale),
                                "link": float(ctx.link / ctx.pre.transform.scale),
-                               "angle_deg": float(np.degrees(ctx.angle)), "min_points": ctx.min_points}}
+                               "angle_deg": float(np.degrees(ctx.angle)), "min_points": ctx.min_points,
+                               "subsample_points": None if picked is None else len(picked.indices),
+                               "voxel": None if picked is None else float(picked.voxel)}}
         unsegmented = np.flatnonzero(seg.labels < 0).astype(np.int64)
         return Result(n_points=len(points), segments=out, unsegmented=unsegmented, timing=timing,
                       options=options, source=source, groups=groups,

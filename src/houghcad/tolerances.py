@@ -238,6 +238,23 @@ class AssociationTolerances:
 
 
 @dataclass(frozen=True)
+class ResolutionTolerances:
+    """Multi-resolution segmentation of big clouds (our extension, :mod:`houghcad.multires`)."""
+
+    neighbours: int = tol(8, "points", "subsample neighbours whose segments an input point may join: one subsample "
+                          "spacing around it, both sides of a crease")
+    inlier_epsilons: float = tol(1.0, "ε", "an input point joins a segment within the subsample's removal distance, "
+                                 "the band the pipeline itself gave it")
+    angle_deg: float = tol(30.0, "degrees", "the point's normal must agree with the surface's: full-resolution "
+                           "normals of scans scatter more than the subsample's")
+    normals_neighbours: int = tol(10, "points", "PCA neighbourhood of the full-resolution normals when the file "
+                                  "has none")
+    flat_variation: float = tol(0.02, "share of the variance", "a PCA normal is trusted where the neighbourhood is "
+                                "flat (smallest eigenvalue at most this share): across a crease it averages the "
+                                "two faces")
+
+
+@dataclass(frozen=True)
 class Tolerances:
     """All the stages' tolerances (see the module docstring)."""
 
@@ -249,6 +266,7 @@ class Tolerances:
     consolidation: ConsolidationTolerances = field(default_factory=ConsolidationTolerances)
     fillets: FilletTolerances = field(default_factory=FilletTolerances)
     association: AssociationTolerances = field(default_factory=AssociationTolerances)
+    resolution: ResolutionTolerances = field(default_factory=ResolutionTolerances)
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         """``{stage: {name: value}}``, every field."""

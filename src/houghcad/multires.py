@@ -1,0 +1,210 @@
+"""Multi-resolution segmentation (our extension, not in the paper): big clouds are recognised on
+an even subsample, then every input point is labelled from its subsample neighbours.
+
+Recognition cost grows with the points, but a surface is pinned down long before a scan's
+millions of samples: a voxel subsample of about ``max_points`` points, one per occupied voxel,
+keeps every face its share of the surface area. After the pipeline has run on it:
+
+1. each input point looks at its ``neighbours`` nearest subsample points; their segments are its
+   candidates;
+2. it goes to the candidate whose surface is nearest, if that distance is within the subsample's
+   removal distance ε and the point's normal, where it can be trusted, agrees with the surface's;
+   otherwise it stays unsegmented;
+3. the output then refits every segment on a bounded random sample of all its points and
+   computes its MFE on all of them (:func:`houghcad.output.build_segments`).
+
+All work is in chunks of :data:`CHUNK` points (neighbour tables of ``CHUNK x neighbours`` int32,
+never ``n x k``), and the KD-tree queries use both cores; the result does not depend on them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .context import Context
+from .preprocess import Preprocessed, pca_normals
+from .state import Segmentation, surface_distance
+from .tolerances import ResolutionTolerances
+
+__all__ = ["CHUNK", "Subsample", "voxel_subsample", "FullResolution", "propagate"]
+
+#: Points handled at once by the propagation and the normal estimate (bounds the temporary tables).
+CHUNK = 1 << 18
+#: Voxel-size refinements of the subsample: each moves the occupied-voxel count toward the target.
+_VOXEL_STEPS = 6
+#: Coarse grid (cells along the diagonal) of the first surface-area estimate.
+_COARSE_CELLS = 64
+
+
+@dataclass(frozen=True)
+class Subsample:
+    """An even subsample of a cloud.
+
+    Attributes
+    ----------
+    indices : ndarray of int64, shape (m,)
+        Sorted indices of the kept points into the input.
+    voxel : float
+        Edge of the voxels (input units); one point is kept per occupied voxel.
+    """
+
+    indices: np.ndarray
+    voxel: float
+
+
+def _occupied(points: np.ndarray, lo: np.ndarray, h: float) -> np.ndarray:
+    """Voxel key (n,) int64 of each point for voxels of edge h from corner lo."""
+    cells = np.floor((points - lo) / h).astype(np.int64)
+    dims = cells.max(axis=0) + 1
+    return (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+
+
+def voxel_subsample(points: np.ndarray, max_points: int, seed: int = 0) -> Subsample:
+    """At most ``max_points`` points of ``points`` (n, 3), one per voxel, evenly over the surface.
+
+    The voxel edge starts from the surface area read on a coarse grid (a surface of area A
+    occupies about A / h² voxels of edge h) and is refined until at most ``max_points`` voxels
+    are occupied. The point kept in a voxel is drawn with ``seed``.
+    """
+    lo = points.min(axis=0)
+    diag = float(np.linalg.norm(np.ptp(points, axis=0)))
+    h0 = diag / _COARSE_CELLS
+    area = len(np.unique(_occupied(points, lo, h0))) * h0 * h0
+    h = float(np.sqrt(area / max_points))
+    for _ in range(_VOXEL_STEPS):
+        keys = _occupied(points, lo, h)
+        count = len(np.unique(keys))
+        if count <= max_points:
+            break
+        h *= float(np.sqrt(count / max_points)) * 1.02  # a surface fills voxels as 1 / h²
+    else:
+        keys = _occupied(points, lo, h)
+    order = np.random.default_rng(seed).permutation(len(points))
+    _, first = np.unique(keys[order], return_index=True)
+    return Subsample(indices=np.sort(order[first]).astype(np.int64), voxel=h)
+
+
+@dataclass
+class FullResolution:
+    """The subsample's segmentation carried to every input point (standard frame).
+
+    Attributes
+    ----------
+    seg : Segmentation
+        Labels (n,) over the input, the subsample's records, parts and groups.
+    pre : Preprocessed
+        The input in the subsample's standard frame, with normals (n, 3).
+    """
+
+    seg: Segmentation
+    pre: Preprocessed
+
+
+def full_normals(x: np.ndarray, normals: np.ndarray | None, k: int, flat: float,
+                 workers: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals (n, 3) of the standard-frame points ``x`` and whether each can be trusted (n,):
+    the given ones, else PCA of the k nearest neighbours, chunk by chunk, trusted where the
+    neighbourhood is flat (surface variation λ0 / Σλ at most ``flat``). Across a crease PCA
+    averages the two faces' normals: such a normal says nothing about either face."""
+    if normals is not None:
+        return normals, np.ones(len(x), dtype=bool)
+    tree = cKDTree(x)
+    out = np.empty_like(x)
+    trusted = np.empty(len(x), dtype=bool)
+    for a in range(0, len(x), CHUNK):
+        _, nb = tree.query(x[a:a + CHUNK], k=k, workers=workers)
+        out[a:a + CHUNK], ev = pca_normals(x, nb.astype(np.int32))
+        trusted[a:a + CHUNK] = ev[:, 0] <= flat * ev.sum(axis=1)
+    return out, trusted
+
+
+def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.ndarray,
+              normals: np.ndarray | None, tol: ResolutionTolerances, workers: int = -1) -> FullResolution:
+    """Label every input point from the segmentation ``sub`` of its subsample.
+
+    Parameters
+    ----------
+    sub : Segmentation
+        The final (associated) segmentation of the subsample.
+    ctx : Context
+        The subsample run's context: its standard frame, KD-tree, ε and normals.
+    picked : ndarray of int64, shape (m,)
+        The subsample's indices into the input.
+    points : ndarray, shape (n, 3)
+        The input (world units).
+    normals : ndarray, shape (n, 3), optional
+        The input's normals (world), else estimated.
+    """
+    pre = ctx.pre
+    T = pre.transform
+    x = T.points(points)
+    nrm, trusted = full_normals(x, None if normals is None else T.dirs(normals), tol.normals_neighbours,
+                                tol.flat_variation, workers)
+    labels = np.full(len(x), -1, dtype=np.int32)
+    part_of = _part_ids(sub)
+    parts_full = np.full(len(x), -1, dtype=np.int32)
+    reach = tol.inlier_epsilons * ctx.epsilon
+    cos_min = float(np.cos(np.radians(tol.angle_deg)))
+    k = min(tol.neighbours, len(picked))
+    for a in range(0, len(x), CHUNK):
+        X, N, sure = x[a:a + CHUNK], nrm[a:a + CHUNK], trusted[a:a + CHUNK]
+        _, nb = pre.tree.query(X, k=k, workers=workers)
+        nb = nb.reshape(len(X), k).astype(np.int32)
+        rows, segs, near = _candidates(sub.labels[nb], nb)
+        best = np.full(len(X), np.inf)
+        choice = np.full(len(X), -1, dtype=np.int32)
+        for s in np.unique(segs):
+            sel = np.flatnonzero(segs == s)
+            r = rows[sel]
+            d, claimed = surface_distance(sub.records[s], X[r])
+            rec = sub.records[s]
+            cos = np.abs(np.einsum("ij,ij->i", rec.family.surface_normals(rec.prim, X[r]), N[r]))
+            ok = (d <= reach) & ((cos >= cos_min) | ~sure[r])
+            if claimed is not None:  # a fillet's arc takes the points it claims outright
+                ok |= claimed
+            better = ok & (d < best[r])
+            best[r[better]] = d[better]
+            choice[r[better]] = s
+            parts_full[a + r[better]] = part_of[near[sel][better]]
+        labels[a:a + CHUNK] = choice
+    # The subsample's own points keep the labels the pipeline gave them.
+    labels[picked] = sub.labels
+    parts_full[picked] = part_of
+    seg = Segmentation(len(x))
+    seg.records = list(sub.records)
+    seg.relabel(labels)
+    if sub.parts is not None:
+        seg.parts = [_pieces(seg.indices(s), parts_full) for s in range(len(sub))]
+    seg.groups = list(sub.groups)
+    return FullResolution(seg=seg, pre=replace(pre, points=x, normals=nrm))
+
+
+def _candidates(labels: np.ndarray, nb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct segments among each row's neighbours: (row, segment, nearest neighbour of that
+    segment in the row), one triple per pair. ``labels`` and ``nb`` are (c, k), nearest first."""
+    c, k = labels.shape
+    order = np.argsort(labels, axis=1, kind="stable")  # equal labels stay nearest first
+    lab = np.take_along_axis(labels, order, axis=1)
+    first = np.ones((c, k), dtype=bool)
+    first[:, 1:] = lab[:, 1:] != lab[:, :-1]
+    keep = first & (lab >= 0)
+    rows, cols = np.nonzero(keep)
+    return rows, lab[rows, cols], nb[rows, order[rows, cols]]
+
+
+def _part_ids(sub: Segmentation) -> np.ndarray:
+    """Index (m,) of each subsample point's part within its segment (0 when unsplit, -1 free)."""
+    out = np.where(sub.labels >= 0, 0, -1).astype(np.int32)
+    for pieces in sub.parts or []:
+        for j, p in enumerate(pieces):
+            out[p] = j
+    return out
+
+
+def _pieces(idx: np.ndarray, part: np.ndarray) -> list[np.ndarray]:
+    """A segment's points ``idx`` split by their part ids, in part order (no empty piece)."""
+    ids = part[idx]
+    return [idx[ids == j] for j in np.unique(ids)]

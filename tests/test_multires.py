@@ -1,0 +1,124 @@
+"""Multi-resolution segmentation: the even subsample, the propagation to every point, and a big cloud."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from houghcad import synth
+from houghcad.errors import InputError
+from houghcad.evaluate import classification_measures
+from houghcad.multires import _candidates, voxel_subsample
+from houghcad.pipeline import Segmenter
+
+
+def _dsc(result, cloud) -> float:
+    pred = [s.indices for s in result.segments]
+    return float(classification_measures(pred, cloud.segments(), len(cloud.points))["DSC"])
+
+
+def test_voxel_subsample_is_bounded_even_and_seeded():
+    cloud = synth.block_with_hole_and_slot(seed=1, n_points=60000)
+    sub = voxel_subsample(cloud.points, 8000, seed=3)
+    idx = sub.indices
+    assert 0.4 * 8000 <= len(idx) <= 8000
+    assert np.all(np.diff(idx) > 0)  # sorted, no repeats
+    # Even over the surface: every input point has a subsample point within about two voxels.
+    d, _ = cKDTree(cloud.points[idx]).query(cloud.points)
+    assert d.max() <= 2 * np.sqrt(3) * sub.voxel
+    # One point per voxel.
+    cells = np.floor((cloud.points[idx] - cloud.points.min(axis=0)) / sub.voxel).astype(np.int64)
+    assert len(np.unique(cells, axis=0)) == len(idx)
+    np.testing.assert_array_equal(voxel_subsample(cloud.points, 8000, seed=3).indices, idx)
+    assert not np.array_equal(voxel_subsample(cloud.points, 8000, seed=4).indices, idx)
+
+
+def test_candidates_are_distinct_segments_nearest_first():
+    labels = np.array([[2, -1, 2, 0], [-1, -1, -1, -1], [1, 1, 1, 1]])
+    nb = np.array([[10, 11, 12, 13], [20, 21, 22, 23], [30, 31, 32, 33]])
+    rows, segs, near = _candidates(labels, nb)
+    got = sorted(zip(rows.tolist(), segs.tolist(), near.tolist()))
+    assert got == [(0, 0, 13), (0, 2, 10), (2, 1, 30)]
+
+
+@pytest.fixture(scope="module")
+def block():
+    return synth.block_with_hole_and_slot(seed=2, n_points=40000)
+
+
+@pytest.fixture(scope="module")
+def full_and_multires(block):
+    full = Segmenter(full_resolution=True).fit(block.points).result_
+    multi = Segmenter(max_points=10000).fit(block.points).result_
+    return full, multi
+
+
+def test_subsample_then_propagation_matches_full_resolution(block, full_and_multires):
+    full, multi = full_and_multires
+    assert full.options["derived"]["subsample_points"] is None
+    m = multi.options["derived"]["subsample_points"]
+    assert 4000 <= m <= 10000
+    assert {"subsample", "propagate"} <= set(multi.timing)
+    assert sorted(s.type for s in multi.segments) == sorted(s.type for s in full.segments)
+    assert _dsc(multi, block) >= _dsc(full, block) - 0.02
+    # Labels over every input point, each point in at most one segment, MFE on all of them.
+    owned = np.concatenate([s.indices for s in multi.segments] + [multi.unsegmented])
+    assert len(owned) == len(block.points) and len(np.unique(owned)) == len(owned)
+    assert len(multi.unsegmented) <= 0.005 * len(block.points)
+    assert multi.normals.shape == block.points.shape
+    assert np.isfinite(multi.distances[np.setdiff1d(np.arange(len(owned)), multi.unsegmented)]).all()
+
+
+def test_multires_is_deterministic(block, full_and_multires):
+    _, multi = full_and_multires
+    again = Segmenter(max_points=10000).fit(block.points).result_
+    for a, b in zip(multi.segments, again.segments, strict=True):
+        np.testing.assert_array_equal(a.indices, b.indices)
+        assert a.params == b.params
+
+
+def test_noisy_part_keeps_its_accuracy_on_a_quarter_of_the_points():
+    cloud = synth.plate_with_holes(seed=1, n_points=40000, noise=0.002)
+    full = Segmenter(full_resolution=True).fit(cloud.points).result_
+    multi = Segmenter(max_points=10000).fit(cloud.points).result_
+    assert multi.options["derived"]["subsample_points"] <= 10000
+    assert _dsc(multi, cloud) >= _dsc(full, cloud) - 0.02
+    assert len(multi.unsegmented) <= 0.01 * len(cloud.points)
+
+
+def test_untrusted_normals_do_not_veto_crease_points():
+    """At a crease PCA averages two faces: such points still join the nearest surface."""
+    cloud = synth.block_with_hole_and_slot(seed=2, n_points=40000)
+    strict = Segmenter(max_points=10000, tolerances={"resolution.flat_variation": 1.0}).fit(cloud.points).result_
+    lenient = Segmenter(max_points=10000).fit(cloud.points).result_
+    assert len(lenient.unsegmented) < len(strict.unsegmented) / 5
+
+
+def test_small_clouds_stay_whole_and_bad_sizes_are_refused(block):
+    pts = block.points[:3000]
+    r = Segmenter(max_points=5000).fit(pts).result_
+    assert r.options["derived"]["subsample_points"] is None
+    with pytest.raises(InputError, match="max_points must be a whole number of at least 1000"):
+        Segmenter(max_points=10).fit(pts)
+
+
+def test_cli_options(tmp_path, capsys):
+    import json
+
+    from houghcad.cli import main
+
+    cloud = synth.plate_with_holes(seed=0, n_points=6000)
+    path = tmp_path / "plate.xyz"
+    np.savetxt(path, cloud.points)
+    out = tmp_path / "r.json"
+    assert main(["segment", str(path), "-o", str(out), "--max-points", "10", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "max_points must be a whole number of at least 1000" in err and err.count("\n") == 1
+    assert not out.exists()
+    assert main(["segment", str(path), "-o", str(out), "--max-points", "2000", "--quiet"]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["options"]["max_points"] == 2000 and doc["options"]["derived"]["subsample_points"] <= 2000
+    assert main(["segment", str(path), "-o", str(out), "--max-points", "2000", "--full-resolution", "--quiet"]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["options"]["full_resolution"] and doc["options"]["derived"]["subsample_points"] is None
