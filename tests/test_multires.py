@@ -70,6 +70,14 @@ def test_subsample_then_propagation_matches_full_resolution(block, full_and_mult
     assert np.isfinite(multi.distances[np.setdiff1d(np.arange(len(owned)), multi.unsegmented)]).all()
 
 
+def test_the_files_normals_are_used_for_every_point(block, full_and_multires):
+    _, multi = full_and_multires
+    given = Segmenter(max_points=10000).fit(block.points, block.normals).result_
+    assert given.options["normals_used"] == "input"
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", given.normals, block.normals)), 1.0, atol=1e-9)
+    assert _dsc(given, block) >= _dsc(multi, block) - 0.01
+
+
 def test_multires_is_deterministic(block, full_and_multires):
     _, multi = full_and_multires
     again = Segmenter(max_points=10000).fit(block.points).result_
@@ -122,3 +130,16 @@ def test_cli_options(tmp_path, capsys):
     assert main(["segment", str(path), "-o", str(out), "--max-points", "2000", "--full-resolution", "--quiet"]) == 0
     doc = json.loads(out.read_text())
     assert doc["options"]["full_resolution"] and doc["options"]["derived"]["subsample_points"] is None
+
+
+def test_two_million_points():
+    """A 2M-point part goes through the subsample and the propagation (the scale benchmark times it)."""
+    cloud = synth.gear_like(seed=0, n_points=2_000_000)
+    small = synth.gear_like(seed=0, n_points=100_000)
+    result = Segmenter().fit(cloud.points).result_
+    reference = Segmenter().fit(small.points).result_
+    assert result.options["derived"]["subsample_points"] <= 100_000
+    assert len(result.segments) == len(reference.segments) == len(cloud.primitives)
+    assert sorted(s.type for s in result.segments) == sorted(p["type"] for p in cloud.primitives)
+    assert _dsc(result, cloud) >= _dsc(reference, small) - 0.01
+    assert len(result.unsegmented) <= 0.005 * len(cloud.points)

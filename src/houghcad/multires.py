@@ -109,8 +109,10 @@ def full_normals(x: np.ndarray, normals: np.ndarray | None, k: int, flat: float,
     the given ones, else PCA of the k nearest neighbours, chunk by chunk, trusted where the
     neighbourhood is flat (surface variation λ0 / Σλ at most ``flat``). Across a crease PCA
     averages the two faces' normals: such a normal says nothing about either face."""
-    if normals is not None:
-        return normals, np.ones(len(x), dtype=bool)
+    if normals is not None:  # the file's: trusted where they have a length
+        length = np.linalg.norm(normals, axis=1)
+        ok = length > 0
+        return normals / np.where(ok, length, 1.0)[:, None], ok
     tree = cKDTree(x)
     out = np.empty_like(x)
     trusted = np.empty(len(x), dtype=bool)
