@@ -9,7 +9,10 @@ attributes (intensity, colour ...), name -> (N,) array. Validation (finite, coun
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
 
 
 from ..errors import InputError
@@ -19,6 +22,9 @@ Parsed = tuple
 
 #: ``read(data, source) -> Parsed``.
 Reader = Callable[[bytes, str], Parsed]
+
+#: Column names of normals, in order of preference (PLY, LAS extra bytes, PCD).
+NORMAL_COLUMNS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"), ("NormalX", "NormalY", "NormalZ"))
 
 #: Bytes of a file's start that format detection looks at.
 SNIFF_BYTES = 4096
@@ -70,3 +76,16 @@ def first_word(head: bytes) -> str:
     """First whitespace-separated word of a file's start (ascii, "" when there is none)."""
     start = text_start(head)
     return start.split(None, 1)[0].decode("ascii", "replace") if start else ""
+
+
+def pick_normals(columns: Mapping[str, Any]) -> tuple[np.ndarray | None, tuple[str, ...]]:
+    """The normals (N, 3) float64 from the first triple of :data:`NORMAL_COLUMNS` that ``columns``
+    (name -> (N,) values) holds, and the names used; (None, ()) when there is none or its values
+    are not numeric."""
+    for names in NORMAL_COLUMNS:
+        if all(n in columns for n in names):
+            try:
+                return np.column_stack([np.asarray(columns[n]) for n in names]).astype(np.float64), names
+            except (TypeError, ValueError):
+                return None, ()
+    return None, ()

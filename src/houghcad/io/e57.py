@@ -34,21 +34,12 @@ def read_e57(data: bytes, source: str, scan: int | None = None) -> Parsed:
             f.write(data)
         try:
             e57 = pye57.E57(tmp, mode="r")
-            count = e57.scan_count
         except Exception as exc:  # libE57Format raises its own types on malformed files
             raise InputError(f"{source}: cannot parse E57 file ({one_line(exc)})") from None
-        if count == 0:
-            raise InputError(f"{source}: E57 file holds no scan")
-        if scan is not None and not 0 <= scan < count:
-            raise InputError(f"{source}: no scan {scan} (the file holds scans 0 to {count - 1})")
-        pieces = []
-        for k in range(count) if scan is None else [scan]:
-            try:
-                d = e57.read_scan(k, intensity=True, colors=True, ignore_missing_fields=True, transform=True)
-            except Exception as exc:
-                raise InputError(f"{source}: cannot read scan {k} ({one_line(exc)})") from None
-            pieces.append(d)
-        e57.close()
+        try:
+            pieces = _read_scans(e57, source, scan)
+        finally:
+            e57.close()  # also when a scan fails: the temporary file is removed next
     finally:
         os.unlink(tmp)
     points = np.concatenate([np.column_stack([d["cartesianX"], d["cartesianY"], d["cartesianZ"]])
@@ -61,3 +52,22 @@ def read_e57(data: bytes, source: str, scan: int | None = None) -> Parsed:
     if len(pieces) > 1:
         fields["scan"] = np.concatenate([np.full(len(d["cartesianX"]), k) for k, d in enumerate(pieces)])
     return points, None, fields
+
+
+def _read_scans(e57, source: str, scan: int | None) -> list[dict[str, np.ndarray]]:
+    """Every scan of an open file, in its common frame, or scan ``scan`` only."""
+    try:
+        count = e57.scan_count
+    except Exception as exc:
+        raise InputError(f"{source}: cannot parse E57 file ({one_line(exc)})") from None
+    if count == 0:
+        raise InputError(f"{source}: E57 file holds no scan")
+    if scan is not None and not 0 <= scan < count:
+        raise InputError(f"{source}: no scan {scan} (the file holds scans 0 to {count - 1})")
+    pieces = []
+    for k in range(count) if scan is None else [scan]:
+        try:
+            pieces.append(e57.read_scan(k, intensity=True, colors=True, ignore_missing_fields=True, transform=True))
+        except Exception as exc:
+            raise InputError(f"{source}: cannot read scan {k} ({one_line(exc)})") from None
+    return pieces

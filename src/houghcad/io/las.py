@@ -16,12 +16,11 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import InputError
-from .common import Parsed, one_line
+from .common import Parsed, one_line, pick_normals
 
 _LAS_MAGIC = b"LASF"
 #: Dimensions that are not per-point attributes worth keeping (raw integer coordinates).
 _SKIP = {"x", "y", "z", "X", "Y", "Z"}
-_NORMALS = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"), ("NormalX", "NormalY", "NormalZ"))
 #: Sizes fixed by the LAS specification (bytes): the 1.0-1.2 public header, a VLR header, an
 #: EVLR header and the smallest point record (format 0).
 _MIN_HEADER, _VLR_HEADER, _EVLR_HEADER, _MIN_RECORD = 227, 54, 60, 20
@@ -73,21 +72,10 @@ def read_las(data: bytes, source: str) -> Parsed:
     if caught.messages or len(points) != announced:
         why = caught.messages[0] if caught.messages else f"{len(points)} of {announced} points"
         raise InputError(f"{source}: truncated or damaged LAS/LAZ file ({one_line(Exception(why))})")
-    names = list(las.point_format.dimension_names)
-    normals = None
-    used = set(_SKIP)
-    for triple in _NORMALS:
-        if all(n in names for n in triple):
-            normals = np.column_stack([np.asarray(las[n], dtype=np.float64) for n in triple])
-            used |= set(triple)
-            break
-    fields = {}
-    for name in names:
-        if name in used:
-            continue
-        values = np.asarray(las[name])
-        if values.ndim == 1 and values.dtype.kind in "iufb" and len(values) == len(points):
-            fields[name] = values
+    columns = {name: np.asarray(las[name]) for name in las.point_format.dimension_names if name not in _SKIP}
+    normals, used = pick_normals(columns)
+    fields = {name: v for name, v in columns.items()
+              if name not in used and v.ndim == 1 and v.dtype.kind in "iufb" and len(v) == len(points)}
     return points, normals, fields
 
 

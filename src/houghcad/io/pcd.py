@@ -13,9 +13,7 @@ import io
 import numpy as np
 
 from ..errors import InputError
-from .common import Parsed, one_line
-
-_NORMALS = (("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz"))
+from .common import Parsed, one_line, pick_normals
 
 
 def is_pcd(head: bytes, ext: str) -> bool:
@@ -45,12 +43,7 @@ def read_pcd(data: bytes, source: str) -> Parsed:
         raise InputError(f"{source}: PCD fields with several values each are not supported")
     col = {n: table[:, i] for i, n in enumerate(names)}
     points = np.column_stack([col[k] for k in "xyz"]).astype(np.float64)
-    normals = None
-    used = {"x", "y", "z"}
-    for triple in _NORMALS:
-        if all(n in col for n in triple):
-            normals = np.column_stack([col[n] for n in triple]).astype(np.float64)
-            used |= set(triple)
-            break
+    normals, names = pick_normals(col)
+    used = {"x", "y", "z", *names}
     fields = {n: v for n, v in col.items() if n not in used and n.isidentifier()}
     return points, normals, fields

@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 
 from ..errors import InputError
-from .common import Parsed, count_text, one_line
+from .common import Parsed, count_text, one_line, pick_normals
 
 
 def is_ply(head: bytes, ext: str) -> bool:
@@ -86,16 +86,8 @@ def read_ply(data: bytes, source: str) -> Parsed:
         points = np.column_stack([arr[props[k]] for k in "xyz"]).astype(np.float64)
     except (TypeError, ValueError):
         raise InputError(f"{source}: PLY x, y, z properties are not numeric") from None
-    normals = None
-    used = {"x", "y", "z"}
-    for names in (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z")):
-        if all(n in props for n in names):
-            try:
-                normals = np.column_stack([arr[props[n]] for n in names]).astype(np.float64)
-                used |= set(names)
-            except (TypeError, ValueError):
-                normals = None
-            break
+    normals, names = pick_normals({k: arr[v] for k, v in props.items()})
+    used = {"x", "y", "z", *names}
     # The vertex's other scalar properties (intensity, colour ...) go through to the outputs.
     fields = {props[k]: np.asarray(arr[props[k]]) for k in props
               if k not in used and np.asarray(arr[props[k]]).dtype.kind in "iufb"}

@@ -84,6 +84,8 @@ class Format:
         unknown.
     guess_rank : int
         Order of the guesses (lowest first): a weak test may accept another format's file too.
+    scans : bool
+        The file may hold several scans: ``read`` also takes ``scan=K`` (None: all, merged).
     """
 
     name: str
@@ -92,6 +94,7 @@ class Format:
     magic: Callable[[bytes, str], bool] | None = None
     guess: Callable[[bytes], bool] | None = None
     guess_rank: int = 0
+    scans: bool = False
 
 
 #: Every readable format; the order is that of :data:`FORMATS` (and of the error messages).
@@ -108,7 +111,7 @@ FORMAT_TABLE: tuple[Format, ...] = (
     Format("stl", mesh.read_stl, (".stl",), guess=mesh.looks_like_stl, guess_rank=0),
     Format("fit4cad", text.read_fit4cad, magic=text.is_fit4cad),
     Format("las", las.read_las, (".las", ".laz"), magic=las.is_las),
-    Format("e57", e57.read_e57, (".e57",), magic=e57.is_e57),
+    Format("e57", e57.read_e57, (".e57",), magic=e57.is_e57, scans=True),
     Format("pcd", pcd.read_pcd, (".pcd",), magic=pcd.is_pcd),
 )
 
@@ -198,10 +201,12 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None, *, scan: i
             raise InputError(f"{source}: unknown format {fmt!r} (expected one of {', '.join(FORMATS)})")
     # Arbitrary bytes make arbitrary floats (signalling NaNs, overflowing casts): NaN and inf are
     # reported by validate_points, not as numpy warnings on stderr.
-    if scan is not None and fmt != "e57":
-        raise InputError(f"{source}: a scan can be chosen in E57 files only")
+    reader = _BY_NAME[fmt]
+    if scan is not None and not reader.scans:
+        kinds = ", ".join(f.name.upper() for f in FORMAT_TABLE if f.scans)
+        raise InputError(f"{source}: a scan can be chosen in {kinds} files only")
     with np.errstate(all="ignore"):
-        parsed = _BY_NAME[fmt].read(data, source, scan=scan) if fmt == "e57" else _BY_NAME[fmt].read(data, source)
+        parsed = reader.read(data, source, scan=scan) if reader.scans else reader.read(data, source)
         points, normals = parsed[0], parsed[1]
         fields = dict(parsed[2]) if len(parsed) > 2 else {}
         dropped = 0
