@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -67,7 +68,7 @@ def run_processes(clouds: list[Path], out: Path, jobs: int) -> Run:
         cmd = [*_houghcad(), "segment", str(path), "-o", str(out / f"{path.stem}_segments.json"),
                "--fit4cad", str(out), "--quiet"]
         ok = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0
-        return path.stem, _score(out / f"{path.stem}_primitives.txt", path) if ok else None
+        return path.stem, _score(out / path.stem, path) if ok else None
 
     t0 = time.perf_counter()
     with ThreadPoolExecutor(jobs) as pool:
@@ -81,18 +82,14 @@ def run_processes(clouds: list[Path], out: Path, jobs: int) -> Run:
     return run
 
 
-def _score(predicted: Path, cloud: Path) -> float:
-    """DSC of a written Fit4CAD segmentation against the ground truth beside the cloud."""
+def _score(written: Path, cloud: Path) -> float:
+    """DSC of the Fit4CAD segmentation ``segment`` wrote beside ``written``_segments.json against
+    the ground truth beside the cloud (the point count from the JSON: the cloud is not read again)."""
     gt = read_fit4cad_segments(cloud.with_name(f"{cloud.stem}_primitives.txt"))
-    pred = read_fit4cad_segments(predicted)
-    n = _count_points(cloud)
+    pred = read_fit4cad_segments(written.with_name(f"{written.name}_primitives.txt"))
+    with open(written.with_name(f"{written.name}_segments.json"), encoding="utf-8") as fh:
+        n = int(json.load(fh)["n_points"])
     return float(classification_measures(pred, gt, n)["DSC"])
-
-
-def _count_points(cloud: Path) -> int:
-    from houghcad.io import read_points
-
-    return len(read_points(cloud))
 
 
 def run_batch(folder_or_files: list[str], out: Path, workers: int) -> Run:

@@ -81,7 +81,7 @@ def child_houghcad(ply: str, out: str) -> dict:
     return {"seconds": seconds, "peak_mb": peak, "segments": len(doc["segments"])}
 
 
-def child_cgal(ply: str, out: str, sigma: float) -> dict:
+def child_cgal(ply: str, out: str, sigma: float, diag: float) -> dict:
     from CGAL.CGAL_Point_set_3 import Point_set_3
     from CGAL.CGAL_Point_set_processing_3 import pca_estimate_normals
     from CGAL.CGAL_Shape_detection import efficient_RANSAC
@@ -93,8 +93,6 @@ def child_cgal(ply: str, out: str, sigma: float) -> dict:
     ps.add_normal_map()
     pca_estimate_normals(ps, 12)
     sm = ps.add_int_map("shape_index")
-    pts = PlyData.read(ply)["vertex"]
-    diag = float(np.linalg.norm([np.ptp(pts[k]) for k in "xyz"]))
     efficient_RANSAC(ps, sm, min_points=max(50, n // 2000), epsilon=0.005 * diag + 3 * sigma,
                      cluster_epsilon=0.01 * diag, normal_threshold=0.9, probability=0.05,
                      planes=True, cylinders=True, cones=True, spheres=True, tori=True)
@@ -102,7 +100,7 @@ def child_cgal(ply: str, out: str, sigma: float) -> dict:
     # The bindings read a map one value per call: write the point set and read its field back.
     tmp = out + "_cgal.ply"
     ps.write(tmp)
-    written = PlyData.read(tmp)["vertex"]
+    written, pts = PlyData.read(tmp)["vertex"], PlyData.read(ply)["vertex"]  # after the clock stopped
     labels = np.asarray(written["shape_index"], dtype=np.int32)
     # Efficient RANSAC reorders the point set: back to the input's order by exact position.
     from scipy.spatial import cKDTree
@@ -140,7 +138,7 @@ def measure(part: str, n: int, noise: float, tools: list[str], work: Path, seed:
     out = []
     for tool in tools:
         stem = str(work / f"{tool}_{part}_{n}_{noise}")
-        extra = [str(cloud.sigma)] if tool == "cgal" else []
+        extra = [str(cloud.sigma), str(cloud.diagonal())] if tool == "cgal" else []
         got = _run_child([tool, str(ply), stem, *extra])
         m = Measure(tool, part, n, noise, **{k: got.get(k) for k in ("seconds", "peak_mb", "segments")},
                     error=got.get("error", ""))
@@ -207,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         tool, ply, out, *rest = sys.argv[2:]
-        result = child_houghcad(ply, out) if tool == "houghcad" else child_cgal(ply, out, float(rest[0]))
+        result = child_houghcad(ply, out) if tool == "houghcad" else child_cgal(ply, out, float(rest[0]), float(rest[1]))
         print(json.dumps(result))
         sys.exit(0)
     sys.exit(main())

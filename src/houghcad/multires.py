@@ -158,11 +158,13 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
         rows, segs, near = _candidates(sub.labels[nb], nb)
         best = np.full(len(X), np.inf)
         choice = np.full(len(X), -1, dtype=np.int32)
-        for s in np.unique(segs):
-            sel = np.flatnonzero(segs == s)
+        # Pairs grouped by segment with one sort, not one scan of every pair per segment.
+        by_seg = np.argsort(segs, kind="stable")
+        present, starts = np.unique(segs[by_seg], return_index=True)
+        for s, sel in zip(present.tolist(), np.split(by_seg, starts[1:])):
             r = rows[sel]
-            d, claimed = surface_distance(sub.records[s], X[r])
             rec = sub.records[s]
+            d, claimed = surface_distance(rec, X[r])
             cos = np.abs(np.einsum("ij,ij->i", rec.family.surface_normals(rec.prim, X[r]), N[r]))
             ok = (d <= reach) & ((cos >= cos_min) | ~sure[r])
             if claimed is not None:  # a fillet's arc takes the points it claims outright
