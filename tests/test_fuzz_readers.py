@@ -49,6 +49,8 @@ from houghcad.io import read_points, write_points_ply
 from houghcad.io.readers import FORMATS, MIN_POINTS
 from houghcad.result import Result, Segment
 
+from _scanner_files import e57_bytes, las_bytes, pcd_bytes
+
 #: Multiplies every example count (``HOUGHCAD_FUZZ_SCALE=10`` for a long local run).
 SCALE = float(os.environ.get("HOUGHCAD_FUZZ_SCALE", "1"))
 #: Examples per test; their sum is the number of generated inputs per run (>= 2,000).
@@ -142,42 +144,9 @@ def _houghcad_ply(pts, nrm, *, binary: bool) -> bytes:
         return path.read_bytes()
 
 
-def _las_bytes(pts, nrm, *, compressed: bool) -> bytes:
-    import laspy
-
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = np.array([1e-6] * 3)
-    header.offsets = pts.min(axis=0)
-    header.add_extra_dims([laspy.ExtraBytesParams(name=k, type=np.float32) for k in ("nx", "ny", "nz")])
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = pts.T
-    las.nx, las.ny, las.nz = nrm.T.astype(np.float32)
-    las.intensity = np.arange(len(pts), dtype=np.uint16)
-    buf = io.BytesIO()
-    las.write(buf, do_compress=compressed)
-    return buf.getvalue()
-
-
-def _pcd_bytes(pts, nrm, encoding: str) -> bytes:
-    from pypcd4 import Encoding
-    from pypcd4 import PointCloud as Pcd
-
-    arr = np.hstack([pts, nrm]).astype(np.float32)
-    cloud = Pcd.from_points(arr, ["x", "y", "z", "normal_x", "normal_y", "normal_z"], [np.float32] * 6)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "seed.pcd"
-        cloud.save(str(path), encoding=Encoding(encoding))
-        return path.read_bytes()
-
-
-def _e57_bytes(pts) -> bytes:
-    import pye57
-
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "seed.e57"
-        with contextlib.closing(pye57.E57(str(path), mode="w")) as e57:
-            e57.write_scan_raw({"cartesianX": pts[:, 0], "cartesianY": pts[:, 1], "cartesianZ": pts[:, 2]})
-        return path.read_bytes()
+def _pcd_columns(pts: np.ndarray, nrm: np.ndarray) -> dict[str, np.ndarray]:
+    names = ("x", "y", "z", "normal_x", "normal_y", "normal_z")
+    return dict(zip(names, np.hstack([pts, nrm]).T))
 
 
 @cache
@@ -215,12 +184,12 @@ def seeds() -> dict[str, tuple[str, bytes]]:
         "noff": (".off", _text(["NOFF 45 0 0"] + _rows(p45, n45))),
         "stl_ascii": (".stl", _stl_ascii(p45)),
         "stl_binary": (".stl", _stl_binary(p120)),
-        "las": (".las", _las_bytes(p45, n45, compressed=False)),
-        "laz": (".laz", _las_bytes(p60, n60, compressed=True)),
-        "pcd_ascii": (".pcd", _pcd_bytes(p30, n30, "ascii")),
-        "pcd_binary": (".pcd", _pcd_bytes(p45, n45, "binary")),
-        "pcd_binary_compressed": (".pcd", _pcd_bytes(p60, n60, "binary_compressed")),
-        "e57": (".e57", _e57_bytes(p45)),
+        "las": (".las", las_bytes(p45, n45, np.arange(45, dtype=np.uint16))),
+        "laz": (".laz", las_bytes(p60, n60, np.arange(60, dtype=np.uint16), compressed=True)),
+        "pcd_ascii": (".pcd", pcd_bytes(_pcd_columns(p30, n30), "ascii")),
+        "pcd_binary": (".pcd", pcd_bytes(_pcd_columns(p45, n45), "binary")),
+        "pcd_binary_compressed": (".pcd", pcd_bytes(_pcd_columns(p60, n60), "binary_compressed")),
+        "e57": (".e57", e57_bytes([(p45, np.zeros(3))], intensity=False)),
     }
 
 

@@ -9,6 +9,8 @@ from houghcad.errors import InputError
 from houghcad.io import read_points
 from houghcad.io.readers import detect_format
 
+from _scanner_files import e57_bytes, las_bytes, pcd_bytes
+
 N = 400
 
 
@@ -21,20 +23,7 @@ def _cloud(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _write_las(path, pts, normals=None, intensity=None):
-    import laspy
-
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = np.array([1e-6] * 3)
-    header.offsets = pts.min(axis=0)
-    if normals is not None:
-        header.add_extra_dims([laspy.ExtraBytesParams(name=k, type=np.float32) for k in ("nx", "ny", "nz")])
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = pts.T
-    if normals is not None:
-        las.nx, las.ny, las.nz = normals.T.astype(np.float32)
-    if intensity is not None:
-        las.intensity = intensity
-    las.write(str(path))
+    path.write_bytes(las_bytes(pts, normals, intensity, compressed=path.suffix == ".laz"))
 
 
 @pytest.mark.parametrize("ext", [".las", ".laz"])
@@ -51,11 +40,7 @@ def test_las_round_trip_with_normals_and_fields(tmp_path, ext):
 
 
 def _write_pcd(path, columns: dict[str, np.ndarray], encoding: str):
-    from pypcd4 import Encoding, PointCloud
-
-    names = list(columns)
-    pc = PointCloud.from_points(np.column_stack([columns[k] for k in names]), names, [np.float32] * len(names))
-    pc.save(str(path), encoding=Encoding(encoding))
+    path.write_bytes(pcd_bytes(columns, encoding))
 
 
 @pytest.mark.parametrize("encoding", ["ascii", "binary", "binary_compressed"])
@@ -89,14 +74,7 @@ def test_nan_rows_are_refused_unless_dropped(tmp_path):
 
 
 def _write_e57(path, scans):
-    import pye57
-
-    e57 = pye57.E57(str(path), mode="w")
-    for k, (pts, translation) in enumerate(scans):
-        data = {"cartesianX": pts[:, 0], "cartesianY": pts[:, 1], "cartesianZ": pts[:, 2],
-                "intensity": np.full(len(pts), k + 0.5)}
-        e57.write_scan_raw(data, name=f"scan {k}", translation=translation)
-    e57.close()
+    path.write_bytes(e57_bytes(scans))
 
 
 def test_e57_merges_every_scan_in_the_common_frame_or_reads_one(tmp_path):
