@@ -86,16 +86,21 @@ class Variant:
     skip: tuple[str, ...] = ()
     tolerances: tuple[tuple[str, float], ...] = ()
     on_fit4cad: bool = True
+    #: Switches of the noise policy turned on for clean clouds (``houghcad.noise.NoisePolicy`` fields).
+    clean_policy: tuple[str, ...] = ()
 
 
 def variants() -> list[Variant]:
     """The baseline, each extension pass off, each tolerance at 0.5× and 2×."""
+    from houghcad.noise import NoisePolicy
     from houghcad.tolerances import Tolerances
 
     out = [Variant("baseline")]
     out += [Variant(f"skip-{p}", skip=(p,), on_fit4cad=p not in NOT_ON_FIT4CAD_PASSES) for p in EXTENSION_PASSES]
     out += [Variant(f"off-{name}", tolerances=tuple(tol.items()), on_fit4cad=active)
             for name, tol, active in SPECIAL_CASES]
+    # Each behaviour the noisy policy adds, tried on clean clouds too.
+    out += [Variant(f"clean+{f.name}", clean_policy=(f.name,)) for f in fields(NoisePolicy) if f.type in (bool, "bool")]
     t = Tolerances()
     for stage in fields(t):
         group = getattr(t, stage.name)
@@ -117,9 +122,18 @@ def variants() -> list[Variant]:
 
 # ------------------------------------------------------------------------------------- running
 
-def _segment(points: np.ndarray, families: str, v: Variant):
-    import houghcad
+from houghcad.noise import CLEAN as _CLEAN  # noqa: E402  (the policy variants start from it)
 
+
+def _segment(points: np.ndarray, families: str, v: Variant):
+    import dataclasses
+
+    import houghcad
+    from houghcad import noise
+
+    # The clean policy is a module constant read when a run chooses its policy; a variant replaces
+    # it in this worker process for the run.
+    noise.CLEAN = dataclasses.replace(_CLEAN, **{f: True for f in v.clean_policy})
     return houghcad.segment(points, families=families, seed=0, skip=v.skip, tolerances=dict(v.tolerances))
 
 

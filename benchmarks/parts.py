@@ -7,7 +7,8 @@ Usage::
                                [--families simple] [--jobs 2] [--no-write]
 
 Every part of :data:`houghcad.synth.PARTS` except the complex composites (scored by
-``complex.py``) is generated at each noise level (σ as a fraction of the diagonal; 0 is a sampled
+``complex.py``) the parts with many small faces (``small_faces.py``, at their own sizes) and the paper's part
+(``paper_table5.py``) is generated at each noise level (σ as a fraction of the diagonal; 0 is a sampled
 CAD model) for ``--seeds`` seeds and goes through ``houghcad.segment(points, families=...)``.
 Each run is scored with the Fit4CAD measures (mean DSC over the part's faces); the table gives
 the mean over seeds, each seed's figure, the face with the lowest DSC over the seeds and the
@@ -50,7 +51,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     from houghcad import synth
 
-    parts = [p for p in synth.PARTS if p not in COMPOSITES]
+    parts = [p for p in synth.PARTS if p not in COMPOSITES and p not in synth.SMALL_FACE_PARTS
+             and p not in synth.PAPER_PARTS]
     noise = [float(x) for x in a.noise.split(",") if x.strip()]
     cases = [(p, s, a.points, nz, a.families) for nz in noise for p in parts for s in range(a.seeds)]
     rows = []

@@ -129,6 +129,21 @@ def test_main_writes_csv_and_summary(tiny_set: Path, tmp_path: Path, capsys):
     assert bench.main([str(tiny_set), "--names", "PC99", "--no-write"]) == 2
 
 
+def test_summary_has_face_ratio_and_maximal_scores():
+    rows = []
+    for name, n_gt, n_pred, dsc, dmax in (("PC1", 4, 4, 1.0, 0.9), ("PC2", 10, 12, 0.8, 0.8), ("PC3", 5, 10, 0.5, 0.5)):
+        r = bench.failure_row(name, "", n_gt=n_gt)
+        r.update(error=None, n_pred=n_pred, DSC=dsc, DSC_maximal=dmax, seconds=1.0)
+        rows.append(r)
+    s = bench.summarize(rows)
+    assert s["face_ratio_median"] == pytest.approx(1.2)
+    assert s["face_ratio_p90"] == pytest.approx(1.2 + 0.8 * 0.8)
+    assert s["DSC_maximal_mean"] == pytest.approx(2.2 / 3)
+    md = bench.section_markdown("simple", rows, s, "python x", "2024-01-01")
+    assert "| ratio | 1.20 | 1.84 |" in md and "DSC maximal" in md
+    assert "predicted/true faces: median 1.20" in bench.summary_text(s)
+
+
 def test_write_section_replaces_or_appends(tmp_path: Path):
     md = tmp_path / "BENCHMARKS.md"
     rows = [bench.failure_row("PC1", "boom | bang", n_gt=3)]

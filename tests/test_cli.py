@@ -357,8 +357,12 @@ def test_evaluate_text_and_json(tmp_path, capsys):
     report = json.loads(capsys.readouterr().out)
     assert list(report["measures"])[0] == "DSC"
     assert report["measures"]["DSC"] == pytest.approx(1.0 - (5 / 2) / 100, abs=0.05)
-    assert report["n_gt"] == 2 and report["n_pred"] == 2
+    assert report["n_gt"] == 2 and report["n_pred"] == 2 and report["scored"] == "faces"
     assert set(report["mfe"]) == {"min", "mean", "max"}
+    assert main(["evaluate", str(rpath), str(gt), "--maximal", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["scored"] == "maximal"
+    assert main(["evaluate", str(rpath), str(gt), "--maximal"]) == 0
+    assert "predicted maximal primitives (ratio" in capsys.readouterr().out
 
 
 def test_evaluate_missing_files(tmp_path, capsys):

@@ -20,7 +20,7 @@ from houghcad.evaluate import (
     read_fit4cad_segments,
     read_fit4cad_types,
 )
-from houghcad.result import Result, Segment
+from houghcad.result import Part, Result, Segment
 
 
 def _fit4cad_dir() -> Path:
@@ -250,6 +250,21 @@ def test_evaluate_files_round_trip(tmp_path: Path):
     assert out["measures"] == {k: 1.0 for k in MEASURES}
     assert out["mfe"] == pytest.approx({"min": 0.01, "mean": 0.015, "max": 0.02})
     assert (out["n_gt"], out["n_pred"]) == (2, 2)
+
+
+def test_evaluate_files_scores_faces_unless_maximal(tmp_path: Path):
+    # Two CAD faces on one cylinder: houghcad reports one maximal primitive with two parts.
+    (tmp_path / "PC7_primitives.txt").write_text("Primitive1:=[1 2 3];\nPrimitive2:=[4 5 6];\n")
+    seg = Segment(0, "cylinder", _arr(0, 1, 2, 3, 4, 5), {}, 0.01,
+                  parts=[Part(_arr(0, 1, 2), {}, 0.01), Part(_arr(3, 4, 5), {}, 0.01)])
+    rj = tmp_path / "result.json"
+    rj.write_text(Result(6, [seg], _arr()).to_json())
+    faces = evaluate_files(rj, tmp_path / "PC7_primitives.txt")
+    assert faces["scored"] == "faces" and faces["n_pred"] == 2
+    assert faces["measures"]["DSC"] == 1.0
+    whole = evaluate_files(rj, tmp_path / "PC7_primitives.txt", maximal=True)
+    assert whole["scored"] == "maximal" and whole["n_pred"] == 1
+    assert whole["measures"]["DSC"] == pytest.approx(2 * 3 / (3 + 6))  # each face against all six points
 
 
 def test_evaluate_files_rejects_bad_results(tmp_path: Path):

@@ -308,3 +308,15 @@ def test_sparse_clean_plate_is_not_taken_for_noise(seed):
     pre = preprocess(cloud.points, seed=0)
     assert pre.noise < 0.05 * pre.spacing
     assert pre.normals_method == "pca"
+
+
+@pytest.mark.parametrize("name, noise", [("bracket", 0.002), ("plate_with_holes", 0.002), ("gear_like", 0.005)])
+def test_noise_estimate_of_a_noisy_part_with_small_features(name: str, noise: float):
+    # 64 neighbours straddle the thin walls and small features: their residual alone read the
+    # bracket's noise as 4 sigma, its faces' rows then fell inside one inlier band.
+    from houghcad import synth
+
+    cloud = synth.PARTS[name](seed=0, noise=noise)
+    pre = preprocess(cloud.points, noise="noisy")
+    sigma = noise * cloud.diagonal()  # world units
+    assert 0.7 < pre.noise / pre.transform.scale / sigma < 1.4

@@ -112,3 +112,27 @@ def test_a_candidate_competes_with_every_one_it_would_displace():
     got = select(cands, np.ones(len(P), bool), ctx)
     assert [c.family.name for c in got] == ["plane", "plane"]
     assert [len(c.indices) for c in got] == [100, 100]
+
+
+# --------------------------------------------------------------------------- clustering
+
+@pytest.mark.parametrize("seed", range(40))
+def test_dbscan_matches_scikit_learn(seed: int):
+    from sklearn.cluster import DBSCAN
+
+    from houghcad.recognize import dbscan
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    # Clumps and scatter, so that core, border and noise points all occur.
+    P = np.vstack([rng.normal(size=(n, 3)) * 0.05 + rng.random(3), rng.random((n // 2, 3))])
+    eps, ms = float(rng.uniform(0.02, 0.3)), int(rng.integers(1, 8))
+    assert np.array_equal(dbscan(P, eps, ms), DBSCAN(eps=eps, min_samples=ms).fit_predict(P))
+
+
+def test_dbscan_empty_and_single():
+    from houghcad.recognize import dbscan
+
+    assert dbscan(np.empty((0, 3)), 0.1, 3).shape == (0,)
+    assert dbscan(np.zeros((1, 3)), 0.1, 1).tolist() == [0]
+    assert dbscan(np.zeros((1, 3)), 0.1, 2).tolist() == [-1]

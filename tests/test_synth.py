@@ -237,6 +237,8 @@ PART_CASES = [
     ("mirrored_cones", {}),
     ("gear_like", {}),
     ("filleted_block", {}),
+    ("bracket", {}),
+    ("table5_block", {}),
 ]
 
 EXPECTED_TYPES = {
@@ -245,9 +247,12 @@ EXPECTED_TYPES = {
     "mirrored_cones": {"plane": 2, "cylinder": 1, "cone": 2},
     "gear_like": {"plane": 2, "cylinder": 14},
     "filleted_block": {"plane": 7, "cylinder": 2, "sphere": 1, "torus": 1},
+    "bracket": {"plane": 20, "cylinder": 24, "cone": 2},
+    "table5_block": {"plane": 2, "cylinder": 1, "torus": 2},
 }
 
-MULTI_COMPONENT = {"block_with_hole_and_slot": {"hole": 2}, "shaft_with_groove": {"shaft": 2}}
+MULTI_COMPONENT = {"block_with_hole_and_slot": {"hole": 2}, "shaft_with_groove": {"shaft": 2},
+                   "table5_block": {"cylinder": 2}}
 
 
 @pytest.fixture(scope="module", params=PART_CASES, ids=lambda c: c[0] + "-" + "-".join(f"{k}={v}" for k, v in c[1].items()))
@@ -379,6 +384,31 @@ def test_filleted_block_dimple_and_fillet():
     top = by_name(c, "box +z")[1]
     h = c.points[c.labels == k] @ _v(top["normal"]) - top["offset"]
     assert np.all(h > -tol) and np.all(h < tor["minor_radius"] + tol)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_bracket_has_many_small_faces(seed):
+    c = S.bracket(seed=seed)
+    sizes = np.bincount(c.labels, minlength=len(c.primitives))
+    assert len(c.points) == 8000 and len(c.primitives) == 46
+    assert np.sum((sizes >= 20) & (sizes <= 100)) >= 25  # chamfers, hole walls, steps, boss tops
+    # The holes are empty: no point inside a hole's radius within the plate.
+    tol = 1e-9 * c.diagonal()
+    for p in c.primitives:
+        if p["name"].startswith("hole"):
+            assert np.all(_axis_dist(p["params"], c.points) > p["params"]["radius"] - tol), p["name"]
+
+
+def test_table5_block_has_the_papers_parameters():
+    c = S.table5_block(n_points=5000)
+    p = {q["name"]: q["params"] for q in c.primitives}
+    assert p["bottom plane"]["offset"] == pytest.approx(1.28) and p["bottom plane"]["normal"][2] == -1.0
+    assert p["top plane"]["offset"] == pytest.approx(1.28) and p["top plane"]["normal"][2] == 1.0
+    assert p["cylinder"]["radius"] == pytest.approx(1.80)
+    assert (p["torus 1 (bead)"]["major_radius"], p["torus 1 (bead)"]["minor_radius"]) == pytest.approx((1.49, 0.72))
+    assert (p["torus 2 (groove)"]["major_radius"], p["torus 2 (groove)"]["minor_radius"]) == pytest.approx((1.05, 0.79))
+    # Unposed: the points are in the paper's frame (the part spans z = -1.28 .. 1.28 + 0.72).
+    assert c.points[:, 2].min() == pytest.approx(-1.28) and c.points[:, 2].max() <= 1.28 + 0.72 + 1e-9
 
 
 def test_parts_deterministic():

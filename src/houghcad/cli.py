@@ -194,6 +194,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result", metavar="RESULT.json", help="file written by 'houghcad segment'")
     p.add_argument("ground_truth", metavar="GROUND_TRUTH",
                    help="NAME_primitives.txt, or the cloud file NAME.txt/.ply/... next to it")
+    p.add_argument("--maximal", action="store_true",
+                   help="score the maximal primitives (the JSON's segments) instead of their faces "
+                        "(each segment's connected parts, one per CAD face as in the ground truth)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=_cmd_evaluate)
 
@@ -458,14 +461,16 @@ def _format_evaluation(report: dict[str, Any]) -> str:
     if mfe:
         lines.append("MFE  " + "  ".join(f"{k} {float(v):.3e}" for k, v in mfe.items()))
     if "n_gt" in report and "n_pred" in report:
-        lines.append(f"segments: {report['n_gt']} in ground truth, {report['n_pred']} predicted")
+        unit = "maximal primitives" if report.get("scored") == "maximal" else "faces"
+        lines.append(f"segments: {report['n_gt']} in ground truth, {report['n_pred']} predicted {unit} "
+                     f"(ratio {report['n_pred'] / max(report['n_gt'], 1):.2f})")
     return "\n".join(lines)
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluate import evaluate_files
 
-    report = evaluate_files(args.result, args.ground_truth)
+    report = evaluate_files(args.result, args.ground_truth, maximal=args.maximal)
     if args.json:
         measures = report["measures"]
         ordered = {"DSC": measures["DSC"], **measures} if "DSC" in measures else measures

@@ -325,7 +325,8 @@ def _cloud_beside(given: Path, gt_file: Path) -> Path | None:
     return next((p for p in names if p.is_file()), None)
 
 
-def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path) -> dict[str, Any]:
+def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
+                   maximal: bool = False) -> dict[str, Any]:
     """Evaluate a saved :class:`Result` (JSON of ``Result.to_dict()``) against Fit4CAD ground truth.
 
     Parameters
@@ -334,12 +335,16 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path) 
         JSON file written from ``Result.to_dict()``.
     ground_truth_path : str or Path
         Anything :func:`ground_truth_for` accepts.
+    maximal : bool
+        Score the maximal primitives (the JSON's segments) instead of their faces (each
+        segment's connected parts, the unit of Fit4CAD's ground truth).
 
     Returns
     -------
     dict
         ``{"measures": {"DSC", "PPV", "TPR", "TNR", "NPV", "ACC"}, "mfe": {"min", "mean", "max"},
-        "n_gt": int, "n_pred": int}``.
+        "scored": "faces" | "maximal", "n_gt": int, "n_pred": int}``; ``n_pred`` counts what
+        was scored.
     """
     rpath = Path(result_json_path)
     text = read_text(rpath)
@@ -382,12 +387,14 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path) 
         if idx.size and (idx.min() < 0 or idx.max() >= n):
             bad = int(idx.min()) if idx.min() < 0 else int(idx.max())
             raise InputError(f"{rpath}: segment {s.id} index {bad} out of range [0, {n})")
-    # Fit4CAD's ground truth has one segment per CAD face: a maximal primitive
-    # is scored by its connected parts.
-    measures = classification_measures(result.faces(), gt, n)
+    # Fit4CAD's ground truth has one segment per CAD face: by default a
+    # maximal primitive is scored by its connected parts.
+    pred = [s.indices for s in result.segments] if maximal else result.faces()
+    measures = classification_measures(pred, gt, n)
     return {
         "measures": {k: measures[k] for k in MEASURES},
         "mfe": mfe_stats(result),
+        "scored": "maximal" if maximal else "faces",
         "n_gt": len(gt),
-        "n_pred": len(result.segments),
+        "n_pred": len(pred),
     }

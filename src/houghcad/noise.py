@@ -56,14 +56,14 @@ class NoisePolicy:
     strict_cover : bool
         A primitive covers a piece only if it fits all the piece's points as
         well as the piece's own primitive, not just the inliers within τ.
-    revote_cluster_families : bool
-        Consolidation votes cone and torus again on groups of segments, and
-        first revisits segments fitted worse than the noise.
+    group_planes : bool
+        Consolidation's cone and torus votes on groups of segments take planes
+        in the groups: a plane fits a slice of a noisy cone or torus within
+        τ, while on exact samples the slice gate keeps planes whole faces
+        (and voting the planes along costs time, not accuracy: ablation).
     revote_creases : bool
         Consolidation also groups segments joined up to the normals' tolerance
         (planes slicing a noisy curved surface meet at wide creases).
-    merge_simple : bool
-        Simple segments too take the adjacent pieces of their surface.
     nearest_edges : bool
         Boundaries go where the surfaces cross (nearest surface, with the
         sides of each edge), then poor fits are revisited, fillets sought and
@@ -81,9 +81,8 @@ class NoisePolicy:
     wide_removal: bool
     absorb_within_tau: bool
     strict_cover: bool
-    revote_cluster_families: bool
+    group_planes: bool
     revote_creases: bool
-    merge_simple: bool
     nearest_edges: bool
 
     @property
@@ -91,8 +90,8 @@ class NoisePolicy:
         return self.name == "noisy"
 
 
-CLEAN = NoisePolicy("clean", *([False] * 13))
-NOISY = NoisePolicy("noisy", *([True] * 13))
+CLEAN = NoisePolicy("clean", *([False] * 12))
+NOISY = NoisePolicy("noisy", *([True] * 12))
 
 
 def choose(noise: str, sigma: float, spacing: float) -> NoisePolicy:

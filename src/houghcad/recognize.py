@@ -14,7 +14,8 @@ from dataclasses import replace
 
 import numpy as np
 from scipy.spatial import cKDTree
-from sklearn.cluster import DBSCAN
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .context import Context
 from .families import Family, Primitive
@@ -23,12 +24,57 @@ from .state import Candidate, SegmentRecord, Segmentation, mean_fitting_error
 from .tolerances import RecognitionTolerances
 
 
+def dbscan(P: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
+    """DBSCAN labels (n,) of P (n, 3), -1 for noise: the same labels as
+    ``sklearn.cluster.DBSCAN(eps, min_samples=min_samples).fit_predict(P)``.
+
+    Written here because the recognition clusters thousands of small inlier
+    sets per cloud, where scikit-learn's per-call validation and neighbour
+    lists cost several times the clustering itself. Core points have at least
+    ``min_samples`` points within ``eps`` (themselves included); clusters are
+    the connected components of the core points, numbered by their lowest
+    point index (scikit-learn's discovery order); a border point joins the
+    first discovered cluster among its core neighbours'.
+    """
+    n = len(P)
+    if n == 0:
+        return np.empty(0, np.int64)
+    pairs = cKDTree(P).query_pairs(eps, output_type="ndarray")
+    deg = np.bincount(pairs.ravel(), minlength=n) + 1
+    core = deg >= min_samples
+    both = core[pairs[:, 0]] & core[pairs[:, 1]]
+    cc = pairs[both]
+    _, comp = connected_components(coo_matrix((np.ones(len(cc)), (cc[:, 0], cc[:, 1])), shape=(n, n)),
+                                   directed=False)
+    lab = np.full(n, -1, np.int64)
+    if not core.any():
+        return lab
+    # Number the components of core points by their lowest index.
+    first = np.full(comp.max() + 1, n, np.int64)
+    ci = np.flatnonzero(core)
+    np.minimum.at(first, comp[ci], ci)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    lab[ci] = rank[comp[ci]]
+    # Border points: the lowest-numbered cluster among their core neighbours.
+    half = pairs[~both]
+    for a, b in ((half[:, 0], half[:, 1]), (half[:, 1], half[:, 0])):
+        m = ~core[a] & core[b]
+        if m.any():
+            cand = np.full(n, np.iinfo(np.int64).max)
+            np.minimum.at(cand, a[m], lab[b[m]])
+            take = (cand < np.iinfo(np.int64).max) & ~core
+            lab[take] = np.where(lab[take] >= 0, np.minimum(lab[take], cand[take]), cand[take])
+    return lab
+
+
 def dense_subsets(P: np.ndarray, link: float, min_points: int, min_samples: int) -> list[np.ndarray]:
     """Connected dense subsets of P (n, 3): DBSCAN components (core points
     with ``min_samples`` neighbours within ``link``) of at least min_points."""
     if len(P) < min_points:
         return []
-    lab = DBSCAN(eps=link, min_samples=min_samples).fit_predict(P)
+    lab = dbscan(P, link, min_samples)
     ok = lab >= 0
     if not ok.any():
         return []

@@ -14,7 +14,6 @@ from dataclasses import replace
 from typing import Callable
 
 import numpy as np
-from sklearn.cluster import DBSCAN
 
 from .context import Context
 from .families import Family
@@ -22,7 +21,7 @@ from .families.base import Primitive
 from .growth import absorb, accept
 from .preprocess import rotation_to_z
 from .ransac import ransac_pieces
-from .recognize import dense_subsets, recognize, select
+from .recognize import dbscan, dense_subsets, recognize, select
 from .state import Candidate, Segmentation, mean_fitting_error
 
 
@@ -30,7 +29,7 @@ def clusters(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
     """DBSCAN clusters (global indices) of the points ``idx``, largest first."""
     if len(idx) < ctx.min_points:
         return []
-    lab = DBSCAN(eps=ctx.link, min_samples=ctx.tol.splitting.cluster_min_samples).fit_predict(ctx.pre.points[idx])
+    lab = dbscan(ctx.pre.points[idx], ctx.link, ctx.tol.splitting.cluster_min_samples)
     out = [idx[lab == k] for k in range(lab.max() + 1)]
     out = [c for c in out if len(c) >= ctx.min_points]
     return sorted(out, key=lambda c: (-len(c), int(c[0])))

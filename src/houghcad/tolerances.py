@@ -162,6 +162,8 @@ class ConsolidationTolerances:
     excess: float = tol(1.3, "ratio to the noise's cost", "segments fitted within this are left alone")
     least_excess: float = tol(0.05, "share of the noise's cost", "excesses below this are the noise's own")
     revisit_min_size: float = tol(3.0, "min_points", "smaller segments are not revisited")
+    exact_taus: float = tol(0.05, "τ", "a segment whose median distance is below this lies on its primitive (the "
+                            "clean refits stop there): what fits it worse is rows of its neighbours")
     complex_halving: float = tol(0.5, "ratio", "a more complex family must halve the excess to displace a simpler one")
     peel_share: float = tol(2 / 3, "share of the group", "a face this dominant is not a piece of a carved surface")
     peel_retries: int = tol(2, "faces", "where the vote takes nothing, the largest faces set aside in turn")

@@ -154,8 +154,26 @@ class Cone(Family):
             h, rho, _ = radial(P, p, a)
             return rho * np.cos(al) - h * np.sin(al)
 
+        def jac(x):
+            # Analytic: finite differences cost six more residual evaluations
+            # per step, and the cone fit runs in every cluster's vote.
+            p, a, al = unpack(x)
+            v = P - p
+            h, rho, e = radial(P, p, a)
+            ca, sa = np.cos(al), np.sin(al)
+            J = np.empty((len(P), 6))
+            J[:, :3] = -ca * e + sa * a  # d/d apex: dh = -a, drho = -e
+            # d/d axis: dh/da = v, drho/da = -h v / rho; a = unit(b) with
+            # b = a0 + x3 e1 + x4 e2, so da/dx = (I - a a^T) e_k / |b|.
+            g = -v * (h * ca / np.maximum(rho, 1e-15) + sa)[:, None]
+            nb = np.linalg.norm(a0 + x[3] * e1 + x[4] * e2)
+            for k, ek in enumerate((e1, e2)):
+                J[:, 3 + k] = g @ ((ek - (a @ ek) * a) / nb)
+            J[:, 5] = -rho * sa - h * ca
+            return J
+
         try:
-            sol = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], method="lm", max_nfev=40)
+            sol = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], jac=jac, method="lm", max_nfev=40)
         except Exception:
             return None
         p, a, al = unpack(sol.x)

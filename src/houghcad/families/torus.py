@@ -152,9 +152,27 @@ class Torus(Family):
             h, rho, _ = radial(P, c, a)
             return np.hypot(rho - R, h) - r
 
+        def jac(x):
+            # Analytic (see Cone.fit): with D the distance to the tube's
+            # centre circle, dD/drho = (rho - R) / D and dD/dh = h / D.
+            c, a, R, r = unpack(x)
+            v = P - c
+            h, rho, e = radial(P, c, a)
+            D = np.maximum(np.hypot(rho - R, h), 1e-15)
+            dr, dh = (rho - R) / D, h / D
+            J = np.empty((len(P), 7))
+            J[:, :3] = -dr[:, None] * e - dh[:, None] * a  # d/d centre: dh = -a, drho = -e
+            g = v * (dh * R / np.maximum(rho, 1e-15))[:, None]  # dh/da = v, drho/da = -h v / rho
+            nb = np.linalg.norm(a0 + x[3] * e1 + x[4] * e2)
+            for k, ek in enumerate((e1, e2)):
+                J[:, 3 + k] = g @ ((ek - (a @ ek) * a) / nb)
+            J[:, 5] = -dr
+            J[:, 6] = -1.0
+            return J
+
         x0 = np.r_[0, 0, 0, 0, 0, prim.params["major_radius"], prim.params["minor_radius"]]
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=50)
+            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=50)
         except Exception:
             return None
         c, a, R, r = unpack(sol.x)

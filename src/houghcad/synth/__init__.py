@@ -3,7 +3,8 @@
 This is the one generator behind the tests, the benchmarks and the examples. Modules:
 :mod:`.primitives` (the cloud, single primitives, shared finishing), :mod:`.parts` (the parts
 with simple surfaces, :data:`PARTS`, the Fit4CAD writer and the demo), :mod:`.complex` (the parts
-with complex surfaces), :mod:`._poses` and :mod:`._faces` (helpers). Each family samples itself:
+with complex surfaces), :mod:`.small_faces` (a part with many small faces), :mod:`.paper` (the part of the paper's noise
+experiment), :mod:`._poses` and :mod:`._faces` (helpers). Each family samples itself:
 its file declares a :class:`~houghcad.families.Sampler` (:data:`SAMPLERS` is the live table), and
 the samplers are re-exported here under their usual names (:func:`sample_cylinder`...).
 
@@ -56,16 +57,21 @@ from .complex import ellipsoid_part, generalized_cone_part, screw_part
 from .parts import (PARTS, block_with_hole_and_slot, filleted_block, gear_like, mirrored_cones, plate_with_holes,
                     shaft_with_groove, write_demo, write_fit4cad_segments)
 from .primitives import FAMILIES, SynthCloud, _Streams, sample_family, sample_parametric, single  # noqa: F401
+from .paper import PAPER_PARTS, table5_block
+from .small_faces import SMALL_FACE_PARTS, bracket
 
 __all__ = [
     "FAMILIES",
     "PARAM_KINDS",
+    "PAPER_PARTS",
     "PARTS",
     "SAMPLERS",
+    "SMALL_FACE_PARTS",
     "Sampler",
     "SynthCloud",
     "apply_transform",
     "block_with_hole_and_slot",
+    "bracket",
     "ellipsoid_part",
     "filleted_block",
     "gear_like",
@@ -92,6 +98,7 @@ __all__ = [
     "screw_part",
     "shaft_with_groove",
     "single",
+    "table5_block",
     "transform_params",
     "write_demo",
     "write_fit4cad_segments",

@@ -16,6 +16,8 @@ from ..families._sampling import TAU
 from ._faces import _box_faces, _cyl_face, _disc_face, _Face, _frame, _in_box, _part, _radial
 from .complex import COMPLEX_PARTS
 from .primitives import SynthCloud, _Streams
+from .paper import PAPER_PARTS
+from .small_faces import SMALL_FACE_PARTS
 
 Array = np.ndarray
 
@@ -328,6 +330,8 @@ PARTS: dict[str, Callable[..., SynthCloud]] = {
     "gear_like": gear_like,
     "filleted_block": filleted_block,
     **COMPLEX_PARTS,
+    **SMALL_FACE_PARTS,
+    **PAPER_PARTS,
 }
 
 
