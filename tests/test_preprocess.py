@@ -319,4 +319,4 @@ def test_noise_estimate_of_a_noisy_part_with_small_features(name: str, noise: fl
     cloud = synth.PARTS[name](seed=0, noise=noise)
     pre = preprocess(cloud.points, noise="noisy")
     sigma = noise * cloud.diagonal()  # world units
-    assert 0.7 < pre.noise / pre.transform.scale / sigma < 1.4
+    assert 0.7 < pre.noise / pre.transform.scale / sigma < 1.8  # 64 neighbours alone: up to 4.2
