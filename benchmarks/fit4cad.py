@@ -548,6 +548,21 @@ def publish_section(marker: str, title: str, script: str, argv: list[str] | None
     return section
 
 
+def run_cases(fn: Callable[[Any], dict[str, Any]], cases: list, jobs: int,
+              describe: Callable[[dict[str, Any]], str]) -> list[dict[str, Any]]:
+    """``fn`` over ``cases`` on a pool of ``jobs`` spawned processes (the synthetic benchmark
+    scripts' loop): the rows in the order of ``cases``, each ``describe(row)`` printed to stderr
+    as it comes."""
+    import multiprocessing as mp
+
+    rows = []
+    with mp.get_context("spawn").Pool(jobs) as pool:
+        for r in pool.imap(fn, cases):
+            rows.append(r)
+            print(describe(r), file=sys.stderr, flush=True)
+    return rows
+
+
 def rows_csv(rows: list[dict[str, Any]]) -> str:
     buf = io.StringIO()
     wr = csv.writer(buf, lineterminator="\n")

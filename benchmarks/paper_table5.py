@@ -18,13 +18,12 @@ The table goes between the ``<!-- table5:begin/end -->`` markers of BENCHMARKS.m
 from __future__ import annotations
 
 import argparse
-import multiprocessing as mp
 import sys
 import time
 
 import numpy as np
 
-from fit4cad import publish_section  # run from benchmarks/
+from fit4cad import publish_section, run_cases  # run from benchmarks/
 
 #: (row label, primitive index, type, parameter) in the paper's order.
 ROWS = (
@@ -103,12 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     sigmas = [float(x) for x in a.sigmas.split(",") if x.strip()]
     cases = [(s, seed) for s in sigmas for seed in range(a.seeds)]
-    rows = []
-    with mp.get_context("spawn").Pool(a.jobs) as pool:
-        for r in pool.imap(run_case, cases):
-            rows.append(r)
-            print(f"σ {r['sigma']:g} seed {r['seed']}: DSC {r['dsc']:.3f}, {r['segments']} segments, "
-                  f"{r['seconds']:.1f} s", file=sys.stderr, flush=True)
+    rows = run_cases(run_case, cases, a.jobs, lambda r: f"σ {r['sigma']:g} seed {r['seed']}: DSC {r['dsc']:.3f}, "
+                     f"{r['segments']} segments, {r['seconds']:.1f} s")
     head = "| segment, parameter | true | " + " | ".join(f"houghcad σ={s:g}" for s in sigmas) + " | " + \
         " | ".join(f"paper σ={s:g}" for s in PAPER_SIGMAS) + " |"
     lines = [head, "|---" * (2 + len(sigmas) + len(PAPER_SIGMAS)) + "|"]

@@ -21,13 +21,12 @@ entry with the mean DSC per noise level to the top of docs/benchmark-log.md, unl
 from __future__ import annotations
 
 import argparse
-import multiprocessing as mp
 import sys
 
 import numpy as np
 
 from complex import COMPOSITES, NEAREST_NOTE, _mean_or_dash, nearest_face_dsc, segment_part  # run from benchmarks/
-from fit4cad import publish_section
+from fit4cad import publish_section, run_cases
 
 
 def run_part(args):
@@ -55,12 +54,9 @@ def main(argv=None) -> int:
              and p not in synth.PAPER_PARTS]
     noise = [float(x) for x in a.noise.split(",") if x.strip()]
     cases = [(p, s, a.points, nz, a.families) for nz in noise for p in parts for s in range(a.seeds)]
-    rows = []
-    with mp.get_context("spawn").Pool(a.jobs) as pool:
-        for r in pool.imap(run_part, cases):
-            rows.append(r)
-            print(f"{r['part']:<26} noise {r['noise']:<6} seed {r['seed']:<3} DSC {r['dsc']:.3f} "
-                  f"worst {r['worst'][1]} {r['worst'][0]:.2f}  {r['seconds']:.1f} s", file=sys.stderr, flush=True)
+    rows = run_cases(run_part, cases, a.jobs, lambda r: (
+        f"{r['part']:<26} noise {r['noise']:<6} seed {r['seed']:<3} DSC {r['dsc']:.3f} "
+        f"worst {r['worst'][1]} {r['worst'][0]:.2f}  {r['seconds']:.1f} s"))
     lines = [NEAREST_NOTE, "", "| part | noise σ | mean DSC | per seed | nearest true face | worst face (DSC) | median s |",
              "|---|---|---|---|---|---|---|"]
     summary = []

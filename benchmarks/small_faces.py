@@ -21,13 +21,12 @@ entry to the top of docs/benchmark-log.md, unless ``--no-write``.
 from __future__ import annotations
 
 import argparse
-import multiprocessing as mp
 import sys
 import time
 
 import numpy as np
 
-from fit4cad import publish_section  # run from benchmarks/
+from fit4cad import publish_section, run_cases  # run from benchmarks/
 
 #: A true face is found when its best-matching predicted face reaches this DSC.
 FOUND_DSC = 0.8
@@ -69,13 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     points = [int(x) for x in a.points.split(",") if x.strip()]
     noise = [float(x) for x in a.noise.split(",") if x.strip()]
     cases = [(p, s, n, nz) for p in SMALL_FACE_PARTS for nz in noise for n in points for s in range(a.seeds)]
-    rows = []
-    with mp.get_context("spawn").Pool(a.jobs) as pool:
-        for r in pool.imap(run_case, cases):
-            rows.append(r)
-            print(f"{r['part']} {r['points']} points noise {r['noise']:g} seed {r['seed']}: DSC {r['dsc']:.3f}, "
-                  f"small faces found {r['small_found']}/{r['small']}, {r['seconds']:.1f} s",
-                  file=sys.stderr, flush=True)
+    rows = run_cases(run_case, cases, a.jobs, lambda r: (
+        f"{r['part']} {r['points']} points noise {r['noise']:g} seed {r['seed']}: DSC {r['dsc']:.3f}, "
+        f"small faces found {r['small_found']}/{r['small']}, {r['seconds']:.1f} s"))
     lines = ["| part | points | noise σ | mean DSC | per seed | small faces found | unsegmented | "
              "predicted / true faces | median s |", "|---|---|---|---|---|---|---|---|---|"]
     summary = []
