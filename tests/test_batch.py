@@ -341,7 +341,7 @@ def test_interrupting_leaves_whole_outputs_and_the_summary_of_the_finished_cloud
             break
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 130 and stderr.endswith("houghcad: interrupted\n") and "Traceback" not in stderr
+    assert proc.returncode == 130 and stderr.endswith("houghcad: interrupted\n") and "Traceback" not in stderr, stderr
     rows, _ = _summary(out)
     assert 2 <= len(rows) < 6 and all(r["status"] in ("ok", "error") for r in rows)
     for result in out.glob("*_segments.json"):
