@@ -89,10 +89,10 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context) -
         s = seg[k]
         if len(s.indices) < t.revisit_min_size * ctx.min_points:
             continue
-        own = cost(s, s.indices)
-        if own <= (t.excess - 1.0) * ref:
+        d = s.family.distance(s.prim, P[s.indices])
+        if float(np.minimum(d, ctx.tau).mean()) - ref <= (t.excess - 1.0) * ref:  # its cost
             continue
-        if np.median(s.family.distance(s.prim, P[s.indices])) <= t.exact_taus * ctx.tau:
+        if np.median(d) <= t.exact_taus * ctx.tau:
             # Most of the segment lies exactly on its primitive: the excess
             # is rows of its neighbours, not a wrong surface.
             continue
@@ -194,16 +194,16 @@ def _groupings(seg: Segmentation, cplx: list[Family], per_cluster: list[Family],
         lctx = replace(ctx, local=True)
         anyc = smooth_adjacency(seg, ctx, smooth=False)
         if not ctx.policy.group_planes:
-            joined, anyc = _curved_only(seg, joined), _curved_only(seg, anyc)
+            curved = np.array([r.family.name != "plane" for r in seg.records], dtype=bool)
+            joined, anyc = _between(curved, joined), _between(curved, anyc)
         votes.append(_Vote(joined, per_cluster, lctx, True))
         votes.append(_Vote(anyc, per_cluster, lctx, True))
     return votes
 
 
-def _curved_only(seg: Segmentation, edges: np.ndarray) -> np.ndarray:
-    """The pairs (k, 2) of ``edges`` between two segments that are not planes."""
-    curved = np.array([r.family.name != "plane" for r in seg.records], dtype=bool)
-    return edges[curved[edges[:, 0]] & curved[edges[:, 1]]] if len(edges) else edges
+def _between(keep: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """The pairs (k, 2) of ``edges`` whose two segments are both in ``keep`` (bool, one per segment)."""
+    return edges[keep[edges[:, 0]] & keep[edges[:, 1]]] if len(edges) else edges
 
 
 def _vote_group(seg: Segmentation, members: np.ndarray, vote: _Vote, removed: np.ndarray,

@@ -59,13 +59,13 @@ def dbscan(P: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
     lab[ci] = rank[comp[ci]]
     # Border points: the lowest-numbered cluster among their core neighbours.
     half = pairs[~both]
-    for a, b in ((half[:, 0], half[:, 1]), (half[:, 1], half[:, 0])):
-        m = ~core[a] & core[b]
-        if m.any():
-            cand = np.full(n, np.iinfo(np.int64).max)
-            np.minimum.at(cand, a[m], lab[b[m]])
-            take = (cand < np.iinfo(np.int64).max) & ~core
-            lab[take] = np.where(lab[take] >= 0, np.minimum(lab[take], cand[take]), cand[take])
+    a, b = np.r_[half[:, 0], half[:, 1]], np.r_[half[:, 1], half[:, 0]]
+    m = ~core[a] & core[b]
+    none = np.iinfo(np.int64).max
+    cand = np.full(n, none)
+    np.minimum.at(cand, a[m], lab[b[m]])
+    border = cand < none
+    lab[border] = cand[border]
     return lab
 
 

@@ -354,6 +354,16 @@ def tangent_basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(a, e1)
 
 
+def unit_derivatives(b: np.ndarray, dirs: tuple[np.ndarray, ...]) -> np.ndarray:
+    """Derivatives (3, k) of ``unit(b)`` along the directions ``dirs`` (k vectors (3,)):
+    ``(I - a a^T) e / |b|`` with ``a = unit(b)``; the chain rule of an axis fitted as
+    ``unit(a0 + x1 e1 + x2 e2)``."""
+    nb = float(np.linalg.norm(b))
+    a = b / nb
+    E = np.asarray(dirs, float)
+    return ((E - np.outer(E @ a, a)) / nb).T
+
+
 def radial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Axial coordinate h (n,), radial distance rho (n,) and radial unit vectors (n, 3)."""
     d = P - point

@@ -11,7 +11,7 @@ from scipy.optimize import least_squares
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, radial,
-                   register, tangent_basis, unit)
+                   register, tangent_basis, unit, unit_derivatives)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
 
 
@@ -164,11 +164,9 @@ class Cone(Family):
             J = np.empty((len(P), 6))
             J[:, :3] = -ca * e + sa * a  # d/d apex: dh = -a, drho = -e
             # d/d axis: dh/da = v, drho/da = -h v / rho; a = unit(b) with
-            # b = a0 + x3 e1 + x4 e2, so da/dx = (I - a a^T) e_k / |b|.
+            # b = a0 + x3 e1 + x4 e2 (base.unit_derivatives).
             g = -v * (h * ca / np.maximum(rho, 1e-15) + sa)[:, None]
-            nb = np.linalg.norm(a0 + x[3] * e1 + x[4] * e2)
-            for k, ek in enumerate((e1, e2)):
-                J[:, 3 + k] = g @ ((ek - (a @ ek) * a) / nb)
+            J[:, 3:5] = g @ unit_derivatives(a0 + x[3] * e1 + x[4] * e2, (e1, e2))
             J[:, 5] = -rho * sa - h * ca
             return J
 

@@ -10,7 +10,8 @@ from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit,
+                   unit_derivatives)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 
@@ -163,9 +164,7 @@ class Torus(Family):
             J = np.empty((len(P), 7))
             J[:, :3] = -dr[:, None] * e - dh[:, None] * a  # d/d centre: dh = -a, drho = -e
             g = v * (dh * R / np.maximum(rho, 1e-15))[:, None]  # dh/da = v, drho/da = -h v / rho
-            nb = np.linalg.norm(a0 + x[3] * e1 + x[4] * e2)
-            for k, ek in enumerate((e1, e2)):
-                J[:, 3 + k] = g @ ((ek - (a @ ek) * a) / nb)
+            J[:, 3:5] = g @ unit_derivatives(a0 + x[3] * e1 + x[4] * e2, (e1, e2))
             J[:, 5] = -dr
             J[:, 6] = -1.0
             return J
