@@ -158,7 +158,8 @@ def process_cloud(
         if segmenter == DEFAULT_SEGMENTER:
             from houghcad.pipeline import Segmenter
 
-            seg = Segmenter(families=_families_arg(families), seed=0).fit(points, None, source=str(cloud_path))
+            seg = Segmenter(families=_families_arg(families), seed=0, n_jobs=1).fit(points, None,
+                                                                                source=str(cloud_path))
             result = seg.result_
             seconds = time.perf_counter() - t0
             # The same recognition without merging: what association adds.

@@ -137,9 +137,6 @@ def _bad_inputs(tmp_path: Path) -> dict[str, tuple[Path, str]]:
     pts[5, 0] = np.inf
     cases["inf"] = (_write_xyz(tmp_path / "inf.xyz", pts), "infinite")
     cases["ten"] = (_write_xyz(tmp_path / "ten.xyz", _blob(10)), "only 10 points")
-    flat = _blob()
-    flat[:, 2] = 1.5
-    cases["coplanar"] = (_write_xyz(tmp_path / "flat.xyz", flat), "coplanar")
     t = np.linspace(0, 1, 50)[:, None]
     cases["collinear"] = (_write_xyz(tmp_path / "line.xyz", t * [1.0, 2.0, 3.0]), "collinear")
     cases["missing"] = (tmp_path / "missing.ply", "file not found")
@@ -149,7 +146,7 @@ def _bad_inputs(tmp_path: Path) -> dict[str, tuple[Path, str]]:
     return cases
 
 
-@pytest.mark.parametrize("case", ["empty", "non-numeric", "nan", "inf", "ten", "coplanar", "collinear",
+@pytest.mark.parametrize("case", ["empty", "non-numeric", "nan", "inf", "ten", "collinear",
                                   "missing", "unknown"])
 def test_segment_bad_input(tmp_path, capsys, monkeypatch, fake_pipeline, case):
     path, word = _bad_inputs(tmp_path)[case]
@@ -439,6 +436,13 @@ def test_segment_passes_noise_persistence_min_points_and_tolerances(tmp_path, fa
     call = fake_pipeline.calls[-1]
     assert call["noise"] == "noisy" and call["persistence"] == 0.2 and call["min_points"] == 25
     assert call["tolerances"] == {"recognition.keep_share": 0.5, "splitting.max_rounds": 3.0}
+    assert call["n_jobs"] is None  # every core unless told
+
+
+def test_segment_jobs_reaches_the_pipeline(tmp_path, fake_pipeline):
+    inp = _write_xyz(tmp_path / "parts.xyz", _parts_cloud())
+    assert main(["segment", str(inp), "-o", str(tmp_path / "o.json"), "-q", "--jobs", "2"]) == 0
+    assert fake_pipeline.calls[-1]["n_jobs"] == 2
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -447,6 +451,7 @@ def test_segment_passes_noise_persistence_min_points_and_tolerances(tmp_path, fa
     (["--tolerance", "splitting.max_rounds=2.5"], "whole number"),
     (["--persistence", "1.5"], "not in (0, 1)"),
     (["--min-points", "0"], "must be >= 1"),
+    (["--jobs", "0"], "must be >= 1"),
     (["--noise", "loud"], "invalid choice"),
 ])
 def test_segment_bad_tuning_options_exit_2_with_one_line(tmp_path, capsys, fake_pipeline, argv, message):

@@ -769,11 +769,11 @@ def test_huge_normals_stay_unit(workdir):
 
 
 def test_coordinates_near_the_float64_limit(workdir):
-    """The degeneracy test overflowed (LAPACK complained on stderr, a flat cloud passed as 3-D)."""
+    """The degeneracy test overflowed (LAPACK complained on stderr, a line passed as a surface)."""
     pts, _ = _cloud(30, 6)
-    flat = np.column_stack([pts[:, 0], pts[:, 1], np.zeros(30)]) * 1e307 + 1e308  # up to 1.5e308
-    path = _write_input(workdir, ".xyz", _text(_rows(flat)))
-    with pytest.raises(InputError, match="coplanar"):
+    line = np.column_stack([pts[:, 0], 0.5 * pts[:, 0], np.zeros(30)]) * 1e307 + 1e308  # up to 1.5e308
+    path = _write_input(workdir, ".xyz", _text(_rows(line)))
+    with pytest.raises(InputError, match="collinear"):
         read_points(path)
     check_read(_write_input(workdir, ".xyz", _text(_rows(pts * 3e307))))
 

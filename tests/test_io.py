@@ -443,15 +443,14 @@ def test_too_few_points(tmp_path, cloud):
     _assert_error(path, e, "only 10 points", str(MIN_POINTS))
 
 
-def test_coplanar(tmp_path):
+def test_coplanar_is_a_surface(tmp_path):
+    """A flat cloud (one planar face) is read; only lines and single points are refused."""
     rng = np.random.default_rng(3)
     uv = rng.uniform(-1, 1, size=(100, 2))
     # a tilted plane, so no coordinate is constant
     pts = np.array([1.0, 0.0, 2.0]) + uv[:, :1] * [0.6, 0.8, 0.0] + uv[:, 1:] * [0.0, 0.0, 1.0] * 3.0
     path = _table(tmp_path / "flat.xyz", pts)
-    with pytest.raises(InputError) as e:
-        read_points(path)
-    _assert_error(path, e, "all points are coplanar")
+    np.testing.assert_allclose(read_points(path).points, pts)
 
 
 def test_collinear(tmp_path):

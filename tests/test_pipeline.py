@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import houghcad
-from houghcad import synth
+from houghcad import parallel, synth
 from houghcad.errors import InputError
 from houghcad.evaluate import PARAMETER_TOLERANCES, classification_measures, parameter_errors
 from houghcad.families import REGISTRY, Family, Primitive
@@ -328,10 +328,24 @@ def test_families_plane_yields_only_planes(small_part):
     pytest.param(lambda p: np.where(np.arange(len(p))[:, None] == 7, np.inf, p), id="inf"),
     pytest.param(lambda p: p[:5], id="too-few"),
     pytest.param(lambda p: np.zeros((0, 3)), id="empty"),
+    pytest.param(lambda p: p * 1e300, id="coordinates-overflow-squares"),
+    pytest.param(lambda p: np.outer(p[:, 0], [1.0, 2.0, 3.0]), id="collinear"),
 ])
 def test_bad_arrays_raise_input_error(small_part, bad):
     with pytest.raises(InputError):
         houghcad.segment(bad(small_part.points.copy()))
+
+
+def test_a_flat_cloud_is_one_plane():
+    """A single planar face (exactly coplanar, as sampled from CAD) is a surface, not bad input."""
+    from houghcad import synth
+
+    cloud = synth.single("plane", 3, n_points=1500)
+    res = houghcad.segment(cloud.points, seed=0)
+    assert [s.type for s in res.segments] == ["plane"]
+    assert len(res.segments[0].indices) >= 0.98 * len(cloud.points)
+    n = np.asarray(res.segments[0].params["normal"])
+    assert abs(n @ np.asarray(cloud.primitives[0]["params"]["normal"])) > np.cos(np.radians(0.1))
 
 
 # ---------------------------------------------------------------------------- Result round trip
@@ -448,3 +462,36 @@ def test_results_hold_plain_python_numbers(small_part):
         for p in s.parts:
             check(p.params)
     assert any(s.type == "cylinder" and type(s.params["radius"]) is float for s in res.segments)
+
+
+# ---------------------------------------------------------------------------- n_jobs
+
+
+@pytest.mark.skipif(not parallel.can_fork(), reason="no fork start method here")
+def test_the_same_result_for_every_n_jobs(monkeypatch):
+    """Families and clusters computed on forked workers give the run's result unchanged."""
+    handed_out = []
+    payload = parallel.Workers._payload
+
+    def counting(self, what, jobs, ctx):
+        got = payload(self, what, jobs, ctx)
+        handed_out.append((what, got is not None))
+        return got
+
+    monkeypatch.setattr(parallel, "PARALLEL_MIN_POINTS", 0)  # every step, however small
+    monkeypatch.setattr(parallel.Workers, "_payload", counting)
+    cloud = synth.block_with_hole_and_slot(seed=2, n_points=5000, noise=0.002)
+    runs = {}
+    for n_jobs in (1, 2, 3):
+        handed_out.clear()
+        d = houghcad.segment(cloud.points, seed=0, n_jobs=n_jobs).to_dict()
+        d.pop("timing")
+        runs[n_jobs] = (json.dumps(d, sort_keys=True), {w for w, ok in handed_out if ok})
+    assert runs[1][0] == runs[2][0] == runs[3][0]
+    assert runs[1][1] == set() and "propose" in runs[2][1] and runs[2][1] == runs[3][1]
+
+
+@pytest.mark.parametrize("n_jobs", ["2", 1.5, True])
+def test_bad_n_jobs_raise_input_error(small_part, n_jobs):
+    with pytest.raises(InputError, match="n_jobs"):
+        houghcad.Segmenter(n_jobs=n_jobs).fit(small_part.points)

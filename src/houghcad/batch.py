@@ -339,7 +339,8 @@ def segment_cloud(job: CloudJob) -> BatchRow:
         with _user_families(job.options.family_files):
             cloud = read_points(job.path, **job.options.read_kwargs())
             cloud.source = job.display  # what `houghcad segment DISPLAY` records
-            result = _run_segmentation(cloud, quiet=True, **job.options.segment_kwargs())
+            # One process per cloud: the batch spreads the clouds over the cores.
+            result = _run_segmentation(cloud, quiet=True, n_jobs=1, **job.options.segment_kwargs())
             written = _write_outputs(job, cloud, result)
         measures, gt_error = _measures(job, result)
     except (OSError, MemoryError):

@@ -177,6 +177,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--trace", metavar="DIR",
                    help="also write the labels after every pass of the pipeline, one PLY per pass named "
                    "NN_PASS.ply, to see where a cloud goes wrong (DIR is created if needed)")
+    p.add_argument("--jobs", type=_positive_int, default=None, metavar="N",
+                   help="processes for the independent work of the run (families, clusters); the result is the "
+                   "same for every N (default: every available core)")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors (and no progress bar)")
     p.set_defaults(func=_cmd_segment)
 
@@ -413,6 +416,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
         taken.append(path)
 
     kwargs = segment_kwargs(args)
+    kwargs["n_jobs"] = args.jobs
     if args.trace:
         kwargs["trace"] = _trace_writer(Path(args.trace), cloud.points)
     result = _run_segmentation(cloud, quiet=args.quiet, **kwargs)

@@ -25,6 +25,7 @@ from .boundaries import dissolve_redundant, settle_edges, settle_noisy_edges
 from .consolidation import consolidate, prefer_planes, revisit_poor_fits
 from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
 from .errors import InputError
+from .parallel import Workers, resolve_jobs
 from .growth import absorb, accept
 from .multires import Subsample, propagate, voxel_subsample
 from .output import build_segments
@@ -51,6 +52,9 @@ _PROPAGATE_AT = 0.93
 DEFAULT_MAX_POINTS = 100_000
 #: A subsample smaller than this no longer holds a mechanical part's small faces.
 MIN_MAX_POINTS = 1000
+#: Coordinates beyond this (units) are refused: the fits sum squared distances, which
+#: overflow float64 (about 1.8e308) long before the coordinates themselves do.
+MAX_COORDINATE = 1e100
 
 
 def _nearest_edges(ctx: Context) -> bool:
@@ -261,6 +265,11 @@ class Segmenter:
         subsample neighbours (:mod:`houghcad.multires`). None: never.
     full_resolution : bool
         Recognise on every point whatever the size (``max_points`` ignored).
+    n_jobs : int, optional
+        Processes for the independent work of a run: the families of one
+        round, the clusters of the splitting phase (:mod:`houghcad.parallel`).
+        None: every available core; 1: this process only. The result is the
+        same for every value.
 
     Attributes
     ----------
@@ -278,7 +287,8 @@ class Segmenter:
                  association: dict[str, Any] | None = None, trace: str | Path | TraceFn | None = None,
                  check: bool | None = None, noise: str = "auto",
                  tolerances: Tolerances | dict[str, Any] | None = None, skip: tuple[str, ...] = (),
-                 max_points: int | None = DEFAULT_MAX_POINTS, full_resolution: bool = False):
+                 max_points: int | None = DEFAULT_MAX_POINTS, full_resolution: bool = False,
+                 n_jobs: int | None = None):
         self.families = families
         self.epsilon = epsilon
         self.normals_method = normals_method
@@ -295,6 +305,7 @@ class Segmenter:
         self.skip = skip
         self.max_points = max_points
         self.full_resolution = full_resolution
+        self.n_jobs = n_jobs
 
     def get_options(self) -> dict[str, Any]:
         fams = self.families
@@ -328,6 +339,9 @@ class Segmenter:
         from .io import validate_points
 
         points = validate_points(np.asarray(points), source)
+        if np.abs(points).max() > MAX_COORDINATE:
+            raise InputError(f"{source or 'input'}: coordinates up to {np.abs(points).max():.3g}; beyond "
+                             f"{MAX_COORDINATE:g} the fits' squared distances overflow, so rescale the cloud")
         if normals is not None:
             normals = np.asarray(normals, dtype=np.float64)
             if normals.shape != points.shape or not np.isfinite(normals).all():
@@ -336,6 +350,8 @@ class Segmenter:
             raise InputError(f"epsilon must be a fraction of the diagonal in (0, 0.5), got {self.epsilon}")
         if not (0 < float(self.persistence) < 1):
             raise InputError(f"persistence must be in (0, 1), got {self.persistence}")
+        if self.n_jobs is not None and (isinstance(self.n_jobs, bool) or not isinstance(self.n_jobs, (int, np.integer))):
+            raise InputError(f"n_jobs must be a whole number or None, got {self.n_jobs!r}")
         if self.noise not in NOISE_CHOICES:
             raise InputError(f"noise must be one of {', '.join(NOISE_CHOICES)}, got {self.noise!r}")
         tol = self._tolerances()
@@ -359,18 +375,25 @@ class Segmenter:
             (points[picked.indices], None if normals is None else normals[picked.indices])
         t0 = time.perf_counter()
         report("preprocess", 0.0)
-        pre = preprocess(work, work_normals, method=self.normals_method, seed=self.seed, noise=self.noise)
+        pre = preprocess(work, work_normals, method=self.normals_method, seed=self.seed, noise=self.noise,
+                         workers=resolve_jobs(self.n_jobs))
         ctx = self._context(pre, len(work), tol)
-        run = Run(ctx, fams, voted, associator, report)
-        runner = Runner(run, {**timing, "preprocess": time.perf_counter() - t0}, self._tracer(work),
-                        checks_enabled() if self.check is None else bool(self.check), total=len(PIPELINE),
-                        skip=frozenset(skip))
-        seg = Segmentation(len(work))
-        for p in PIPELINE:
-            if p is ASSOCIATION:
-                self._before_association = _Saved(seg.copy(), run, dict(runner.timing), points, normals, source,
-                                                  picked)
-            seg = runner(p, seg)
+        timing["preprocess"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        with Workers(ctx, fams, ctx.n_jobs) as workers:
+            if workers.pool is not None:
+                timing["workers"] = time.perf_counter() - t0
+            run = Run(replace(ctx, workers=workers), fams, voted, associator, report)
+            runner = Runner(run, timing, self._tracer(work),
+                            checks_enabled() if self.check is None else bool(self.check), total=len(PIPELINE),
+                            skip=frozenset(skip))
+            seg = Segmentation(len(work))
+            for p in PIPELINE:
+                if p is ASSOCIATION:
+                    self._before_association = _Saved(seg.copy(), replace(run, ctx=ctx), dict(runner.timing),
+                                                      points, normals, source, picked)
+                seg = runner(p, seg)
+        run = replace(run, ctx=ctx)  # the workers are gone
         self.context_ = ctx
         self.result_ = self._result(seg, run, runner.timing, self._before_association)
         report("done", 1.0)
@@ -456,7 +479,7 @@ class Segmenter:
         except ValueError as exc:
             raise InputError(str(exc)) from None
         return derive_context(pre, n, tol, policy, epsilon=self.epsilon, min_points=self.min_points,
-                              persistence=self.persistence, seed=self.seed)
+                              persistence=self.persistence, seed=self.seed, n_jobs=resolve_jobs(self.n_jobs))
 
 
 def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="simple",
@@ -472,7 +495,7 @@ def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="
     normals : ndarray, shape (n, 3), optional
     families, epsilon, seed, normals_method, progress, merge
         See :class:`Segmenter` (``**options`` too: persistence, min_points,
-        association, trace, check).
+        association, trace, check, n_jobs...).
     source : str, optional
         Name of the input, used in messages and in the result.
 

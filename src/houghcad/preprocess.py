@@ -7,13 +7,20 @@ parameter can be mapped back to the input's coordinates.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Callable, TypeVar
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .hough import direction_accumulator, refine_direction
+
+T = TypeVar("T")
+#: Rows per chunk of the per-point fits: fixed, so that the result does not depend on how
+#: many threads share the chunks (and a chunk's (rows, k, 3) arrays stay a few MB).
+ROWS = 8192
 
 
 @dataclass(frozen=True)
@@ -72,7 +79,7 @@ def rotation_to_z(d: np.ndarray, x_hint: np.ndarray | None = None) -> np.ndarray
     return np.stack([x, y, d])
 
 
-def pca_normals(points: np.ndarray, neighbors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def pca_normals(points: np.ndarray, neighbors: np.ndarray, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Unoriented normals by PCA of each point's neighbourhood.
 
     Parameters
@@ -80,6 +87,8 @@ def pca_normals(points: np.ndarray, neighbors: np.ndarray) -> tuple[np.ndarray, 
     points : ndarray, shape (n, 3)
     neighbors : ndarray of int, shape (n, k)
         Indices of the k nearest neighbours (the point itself included).
+    workers : int
+        Threads sharing the chunks of rows (numpy releases the GIL in them).
 
     Returns
     -------
@@ -87,14 +96,27 @@ def pca_normals(points: np.ndarray, neighbors: np.ndarray) -> tuple[np.ndarray, 
     eigvals : ndarray, shape (n, 3)
         Covariance eigenvalues, ascending (squared length units).
     """
-    nb = points[neighbors]
-    nb = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", nb, nb) / neighbors.shape[1]
-    w, v = np.linalg.eigh(cov)
-    return v[:, :, 0], w
+    def fit(rows: slice) -> tuple[np.ndarray, np.ndarray]:
+        nb = points[neighbors[rows]]
+        nb = nb - nb.mean(axis=1, keepdims=True)
+        w, v = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb) / neighbors.shape[1])
+        return v[:, :, 0], w
+
+    parts = by_rows(fit, len(neighbors), workers)
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
-def quadric_residuals(points: np.ndarray, neighbors: np.ndarray, chunk: int = 16384) -> np.ndarray:
+def by_rows(fn: Callable[[slice], T], n: int, workers: int = 1, rows: int = ROWS) -> list[T]:
+    """``fn`` over the chunks of ``rows`` consecutive rows of ``n``, on ``workers`` threads, in
+    order. The chunks do not depend on ``workers``: neither does the result."""
+    chunks = [slice(s, min(s + rows, n)) for s in range(0, n, rows)] or [slice(0, 0)]
+    if workers <= 1 or len(chunks) < 2:
+        return [fn(c) for c in chunks]
+    with ThreadPoolExecutor(min(workers, len(chunks))) as ex:
+        return list(ex.map(fn, chunks))
+
+
+def quadric_residuals(points: np.ndarray, neighbors: np.ndarray, workers: int = 1) -> np.ndarray:
     """RMS residual of a local quadric height-field fit, per point.
 
     Each neighbourhood is put in its PCA frame and fitted with
@@ -105,14 +127,15 @@ def quadric_residuals(points: np.ndarray, neighbors: np.ndarray, chunk: int = 16
     ----------
     points : ndarray, shape (n, 3)
     neighbors : ndarray of int, shape (n, k), k >= 7
+    workers : int
+        Threads sharing the chunks of rows.
 
     Returns
     -------
     ndarray, shape (n,)
     """
-    out = np.empty(len(neighbors))
-    for s in range(0, len(neighbors), chunk):
-        nb = points[neighbors[s:s + chunk]]
+    def fit(rows: slice) -> np.ndarray:
+        nb = points[neighbors[rows]]
         nb = nb - nb.mean(axis=1, keepdims=True)
         _, v = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
         u = np.einsum("nki,nij->nkj", nb, v)
@@ -122,8 +145,9 @@ def quadric_residuals(points: np.ndarray, neighbors: np.ndarray, chunk: int = 16
         ridge = 1e-9 * np.einsum("nii->n", M)[:, None, None] * np.eye(6)
         c = np.linalg.solve(M + ridge, np.einsum("nki,nk->ni", A, h)[..., None])[..., 0]
         r = h - np.einsum("nki,ni->nk", A, c)
-        out[s:s + chunk] = np.sqrt((r**2).mean(axis=1))
-    return out
+        return np.sqrt((r**2).mean(axis=1))
+
+    return np.concatenate(by_rows(fit, len(neighbors), workers))
 
 
 def voting_normals(points: np.ndarray, neighbors: np.ndarray, n_triples: int = 24, angle: float = 10.0,
@@ -233,7 +257,7 @@ WIDE_NORMALS_SPACINGS = 0.3
 
 
 def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: str = "auto",
-               k: int = 16, seed: int = 0, noise: str = "auto") -> Preprocessed:
+               k: int = 16, seed: int = 0, noise: str = "auto", workers: int = 1) -> Preprocessed:
     """Put a world cloud in standard position and estimate its normals.
 
     Parameters
@@ -255,12 +279,15 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         The noise policy (:mod:`houghcad.noise`): "noisy" always widens the
         PCA neighbourhood, "clean" never does, "auto" does when the
         16-neighbour noise estimate exceeds :data:`WIDE_NORMALS_SPACINGS`.
+    workers : int
+        Threads for the neighbour queries and the per-point fits (the result does not depend
+        on it).
     """
     noise_policy = noise
     points = np.asarray(points, dtype=np.float64)
     center, scale0, x = _unit_cube(points)
-    hood = _neighbourhoods(x, k)
-    nrm, dist, noise, used = _choose_normals(x, hood, normals, method, seed, noise_policy)
+    hood = _neighbourhoods(x, k, workers)
+    nrm, dist, noise, used = _choose_normals(x, hood, normals, method, seed, noise_policy, workers)
     # From the neighbourhoods the normals came from (the widened ones on noisy clouds).
     spacing = float(np.median(dist[:, 1]))
     # Connectivity scale: the 6th neighbour's distance is about 1.5 spacings
@@ -332,20 +359,20 @@ class _Neighbourhoods:
     qres: np.ndarray | None
 
 
-def _neighbourhoods(x: np.ndarray, k: int) -> _Neighbourhoods:
+def _neighbourhoods(x: np.ndarray, k: int, workers: int = 1) -> _Neighbourhoods:
     """k-neighbourhoods of the (n, 3) unit-cube points ``x``, their PCA normals and the noise."""
     tree = cKDTree(x)
     k = int(min(k, len(x)))
-    dist, nbr = tree.query(x, k=k)
-    nrm, ev = pca_normals(x, nbr)
+    dist, nbr = tree.query(x, k=k, workers=workers)
+    nrm, ev = pca_normals(x, nbr, workers)
     spacing = float(np.median(dist[:, 1]))
-    noise, qres = _noise_estimate(x, nbr, ev, k, spacing)
+    noise, qres = _noise_estimate(x, nbr, ev, k, spacing, workers)
     return _Neighbourhoods(tree=tree, k=k, dist=dist, nbr=nbr, normals=nrm, noise=noise, spacing=spacing,
                            qres=qres)
 
 
 def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
-                    spacing: float) -> tuple[float, np.ndarray | None]:
+                    spacing: float, workers: int = 1) -> tuple[float, np.ndarray | None]:
     """Robust noise σ of a cloud (its units) and the quadric residuals (n,) when k > 8, else None.
 
     ``nbr`` (n, k) are the neighbourhoods, ``ev`` (n, 3) their covariance eigenvalues (ascending)
@@ -360,13 +387,13 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
         # 8-neighbour residual stays small there, while on real noise it is
         # 1.2-1.65 times smaller (measured on synthetic planes, cylinders,
         # spheres), so twice it bounds the noise without hiding it.
-        ev8 = pca_normals(x, nbr[:, :8])[1]
+        ev8 = pca_normals(x, nbr[:, :8], workers)[1]
         noise = min(noise, 2.0 * float(np.median(np.sqrt(np.maximum(ev8[:, 0], 0)))))
         # Curvature alone (fillets, small tori) inflates the plane residual of
         # clean samples; a local quadric's residual is free of it and, on
         # noise, 1.11-1.17 times smaller than the plane's (synthetic planes,
         # cylinders, spheres, tori at 0.1-1% noise).
-        qres = quadric_residuals(x, nbr)
+        qres = quadric_residuals(x, nbr, workers)
         noise = min(noise, 1.15 * float(np.median(qres)))
     if k > 4:
         # A plate one or two spacings thick, or a sparse random sampling of
@@ -377,7 +404,7 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
         # give (their 25th percentile is above 0.01 spacing from sigma = 0.07
         # spacing on, synthetic planes to tori). There the median quadruple
         # residual, about a third of sigma, bounds the noise.
-        r4 = np.sqrt(np.maximum(pca_normals(x, nbr[:, :4])[1][:, 0], 0))
+        r4 = np.sqrt(np.maximum(pca_normals(x, nbr[:, :4], workers)[1][:, 0], 0))
         q25, q50 = np.quantile(r4, [0.25, 0.5])
         if q25 < 0.002 * spacing:
             noise = min(noise, 3.0 * float(q50))
@@ -385,7 +412,7 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
 
 
 def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | None, method: str, seed: int,
-                    noise_policy: str) -> tuple[np.ndarray, np.ndarray, float, str]:
+                    noise_policy: str, workers: int = 1) -> tuple[np.ndarray, np.ndarray, float, str]:
     """The normals :func:`preprocess` keeps (see its ``method`` and ``noise``).
 
     Parameters
@@ -422,8 +449,8 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
         # of the diagonal, 64 neighbours give ~5° errors where 16 give 25°,
         # measured on synthetic cylinders); the noise estimate improves too.
         kk = int(min(64, len(x)))
-        dist, nbr = hood.tree.query(x, k=kk)
-        nrm, ev = pca_normals(x, nbr)
+        dist, nbr = hood.tree.query(x, k=kk, workers=workers)
+        nrm, ev = pca_normals(x, nbr, workers)
         # Bounded by the small-neighbourhood estimate: 64 neighbours reach
         # across the edges of thin walls and small features, whose geometry
         # then reads as noise (up to 4 times σ on parts of many small faces),

@@ -411,20 +411,25 @@ def candidates(idx: np.ndarray, families: list[Family], ctx: Context, avail: np.
     idx = idx[avail[idx]]
     if len(idx) < ctx.min_points:
         return []
+    # Families voted per cluster join the whole-cloud round on noisy clouds:
+    # there a slice of a cone or torus by a simpler family fits within the
+    # noise, the tangent-slice gate of evaluate() cannot reject it, and only
+    # the whole surface's candidate can beat it.
+    fams = [f for f in families
+            if ctx.local or f.search == "whole" or (ctx.policy.cluster_families_first and f.role == "simple")]
+    got = ctx.workers.candidates(idx, fams, ctx) if ctx.workers else None
+    if got is not None:
+        return got
+    ctx = voting_context(idx, ctx)
+    return [c for f in fams for prim, coarse in propose(f, idx, ctx) for c in evaluate(f, prim, idx, ctx, coarse)]
+
+
+def voting_context(idx: np.ndarray, ctx: Context) -> Context:
+    """``ctx`` with the neighbour table (m, k) of the points ``idx`` among themselves, which
+    the axis votes read (:func:`houghcad.families.cylinder.axis_candidates`, also inside the
+    complex families' fits)."""
     k = min(ctx.tol.recognition.neighbours, len(idx))
-    nbr = cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k)[1]
-    ctx = replace(ctx, neighbors=nbr)
-    cands: list[Candidate] = []
-    for fam in families:
-        # Families voted per cluster join the whole-cloud round on noisy
-        # clouds: there a slice of a cone or torus by a simpler family fits
-        # within the noise, the tangent-slice gate of evaluate() cannot
-        # reject it, and only the whole surface's candidate can beat it.
-        if not (ctx.local or fam.search == "whole" or (ctx.policy.cluster_families_first and fam.role == "simple")):
-            continue
-        for prim, coarse in propose(fam, idx, ctx):
-            cands.extend(evaluate(fam, prim, idx, ctx, coarse))
-    return cands
+    return replace(ctx, neighbors=cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k)[1])
 
 
 def refine(seg: Segmentation, families: list[Family], ctx: Context) -> None:

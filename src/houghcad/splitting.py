@@ -35,29 +35,41 @@ def clusters(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
     return sorted(out, key=lambda c: (-len(c), int(c[0])))
 
 
+#: Clusters go to the workers one per task unless the largest holds more than this share of
+#: their points (then its own families and peaks are spread instead).
+CLUSTER_SHARE = 0.5
+
+
 def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
                     progress: Callable[[int], None] | None = None) -> None:
     """Iterate DBSCAN clustering + recognition on what is left, in place.
-    ``progress(n)`` is called after each cluster of n points."""
+    ``progress(n)`` is called after each cluster of n points.
+
+    Within a round every cluster is recognised on its points at the start of
+    the round (on the run's workers when there are some: the clusters are then
+    independent); the segments found are taken in order of cluster size, each
+    keeping the points that the segments taken before it and their growth left
+    free, refitted on them. The next round reclusters what remains. (Our
+    change to the paper's loop, which recognises each cluster after the
+    previous one's segments have grown: same DSC on the Fit4CAD folds, and it
+    lets the clusters run on both cores.)"""
     lctx = replace(ctx, local=True)
     t = ctx.tol.splitting
     for _ in range(t.max_rounds):
         rest = np.flatnonzero(seg.free)
         found_any = False
-        for cl in clusters(rest, ctx):
+        cls = clusters(rest, ctx)
+        ahead = _recognised_ahead(cls, families, lctx, seg.free)
+        for cl, (got, pieces) in zip(cls, ahead):
             avail = seg.free
             cl = cl[avail[cl]]
             if len(cl) < ctx.min_points:
                 continue
-            found = recognize(cl, families, lctx, avail)
+            found = _still_free(got, avail, ctx)
             if not found:
                 found = coaxial_bands(cl, families, seg, lctx)
-            if not found and len(cl) >= t.ransac_min_size * ctx.min_points:
-                for piece in ransac_pieces(cl, ctx):
-                    got = recognize(piece, families, lctx, avail)
-                    for c in got:  # hidden from the next pieces
-                        avail[c.indices] = False
-                    found += got
+            if not found and pieces is not None:
+                found = _still_free(pieces, avail, ctx)
             accept(found, seg, ctx)
             found_any |= bool(found)
             if found:
@@ -66,6 +78,65 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
                 progress(len(cl))
         if not found_any:
             break
+
+
+def _still_free(found: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Candidate]:
+    """The candidates cut to their points ``avail`` (bool (n,)) leaves, those
+    still of a segment's size."""
+    out = []
+    for c in found:
+        keep = avail[c.indices]
+        if keep.all():
+            out.append(c)
+        elif keep.sum() >= ctx.min_points:
+            # Refitted on what is left, as recognising the cluster now would.
+            idx = c.indices[keep]
+            prim = c.family.fit(c.prim, ctx.pre.points[idx], ctx.pre.normals[idx])
+            ok = prim is not None and c.family.valid(prim, ctx)
+            out.append(replace(c, prim=prim if ok else c.prim, indices=idx))
+    return out
+
+
+def ransac_recognised(cl: np.ndarray, families: list[Family], ctx: Context,
+                      avail: np.ndarray) -> list[Candidate]:
+    """What the Hough recognition finds in each region CGAL's RANSAC proposes on
+    the cluster ``cl``; each piece's segments are hidden from the next pieces."""
+    avail = avail.copy()
+    found: list[Candidate] = []
+    for piece in ransac_pieces(cl, ctx):
+        got = recognize(piece, families, ctx, avail)
+        for c in got:
+            avail[c.indices] = False
+        found += got
+    return found
+
+
+def recognise_cluster(cl: np.ndarray, families: list[Family], ctx: Context,
+                      avail: np.ndarray) -> tuple[list[Candidate], list[Candidate] | None]:
+    """A cluster's recognition, and, when that finds nothing on a cluster
+    large enough, its RANSAC regions' (None otherwise): what the splitting
+    loop needs of a cluster that depends on its points alone."""
+    found = recognize(cl, families, ctx, avail)
+    big = len(cl) >= ctx.tol.splitting.ransac_min_size * ctx.min_points
+    return found, (ransac_recognised(cl, families, ctx, avail) if not found and big else None)
+
+
+def _recognised_ahead(cls: list[np.ndarray], families: list[Family], ctx: Context, free: np.ndarray) \
+        -> list[tuple[list[Candidate], list[Candidate] | None]]:
+    """What :func:`recognise_cluster` gives on each cluster's free points
+    (``free``, bool (n,)), on the run's workers when there are some."""
+    seen = [cl[free[cl]] for cl in cls]
+    todo = [s for s in seen if len(s) >= ctx.min_points]
+    # Clusters come largest first: the costliest are handed out first. When
+    # one cluster holds most of the points, it would keep one worker busy
+    # while the others idle: the clusters are recognised here in turn, each
+    # with its families and peaks spread over the workers instead.
+    spread = len(todo) >= 2 and len(todo[0]) <= CLUSTER_SHARE * sum(map(len, todo))
+    got = ctx.workers.run("cluster", [(s, families, None) for s in todo], ctx) if ctx.workers and spread else None
+    if got is None:
+        got = [recognise_cluster(s, families, ctx, free) for s in todo]
+    it = iter(got)
+    return [next(it) if len(s) >= ctx.min_points else ([], None) for s in seen]
 
 
 def coaxial_bands(cl: np.ndarray, families: list[Family], seg: Segmentation, ctx: Context) -> list[Candidate]:

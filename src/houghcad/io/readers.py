@@ -287,7 +287,8 @@ def validate_points(
     InputError
         ``"<source>: <problem>"`` for: no points, non-numeric values, wrong
         shape, NaN or inf, fewer than :data:`MIN_POINTS` points, all points
-        identical, collinear or coplanar.  Duplicate points are allowed.
+        identical or collinear.  Duplicate points are allowed, and so is a flat cloud (one
+        planar face is a surface like any other).
     """
     name = source if source is not None else "input"
     try:
@@ -367,7 +368,8 @@ def _read_bytes(path: Path, source: str) -> bytes:
 
 
 def _degeneracy(pts: np.ndarray) -> str | None:
-    """Describe a flat/linear/point-like cloud, or None when it spans 3-D.
+    """Describe a linear or point-like cloud, or None when it spans a surface (a flat cloud does:
+    it comes out as one plane).
 
     Uses the singular values of the centred (N, 3) points: their ratios are
     scale-free, unlike the covariance eigenvalues (which square them).
@@ -385,6 +387,4 @@ def _degeneracy(pts: np.ndarray) -> str | None:
         return "all points are identical"
     if s[1] / s[0] < _DEGENERATE_RTOL:
         return "all points are collinear"
-    if s[2] / s[0] < _DEGENERATE_RTOL:
-        return "all points are coplanar"
     return None

@@ -4,7 +4,7 @@ This is the one generator behind the tests, the benchmarks and the examples. Mod
 :mod:`.primitives` (the cloud, single primitives, shared finishing), :mod:`.parts` (the parts
 with simple surfaces, :data:`PARTS`, the Fit4CAD writer and the demo), :mod:`.complex` (the parts
 with complex surfaces), :mod:`.small_faces` (a part with many small faces), :mod:`.paper` (the part of the paper's noise
-experiment), :mod:`._poses` and :mod:`._faces` (helpers). Each family samples itself:
+experiment), :mod:`.perturb` (what scans do: noise, undersampling, holes, bumps, outliers), :mod:`._poses` and :mod:`._faces` (helpers). Each family samples itself:
 its file declares a :class:`~houghcad.families.Sampler` (:data:`SAMPLERS` is the live table), and
 the samplers are re-exported here under their usual names (:func:`sample_cylinder`...).
 
@@ -58,6 +58,7 @@ from .parts import (PARTS, block_with_hole_and_slot, filleted_block, gear_like, 
                     shaft_with_groove, write_demo, write_fit4cad_segments)
 from .primitives import FAMILIES, SynthCloud, _Streams, sample_family, sample_parametric, single  # noqa: F401
 from .paper import PAPER_PARTS, table5_block
+from .perturb import Perturbation, perturb
 from .small_faces import SMALL_FACE_PARTS, bracket
 
 __all__ = [
@@ -65,6 +66,7 @@ __all__ = [
     "PARAM_KINDS",
     "PAPER_PARTS",
     "PARTS",
+    "Perturbation",
     "SAMPLERS",
     "SMALL_FACE_PARTS",
     "Sampler",
@@ -78,6 +80,7 @@ __all__ = [
     "generalized_cone_part",
     "mirrored_cones",
     "param_kinds",
+    "perturb",
     "plate_with_holes",
     "random_pose",
     "random_rotation",

@@ -1,0 +1,91 @@
+#!/usr/bin/env python
+"""Both cores inside one cloud (issue 20): each Fit4CAD cloud segmented with ``n_jobs=1`` and with
+``n_jobs=N``, one cloud at a time in this process.
+
+Usage::
+
+    python benchmarks/cloud_jobs.py ../shared/fit4cad/training_set [--jobs 2] [--limit N] [--no-write]
+
+For every cloud it times the ``Segmenter.fit`` call with one job and with ``--jobs`` jobs (the
+families of a round and the clusters of the splitting phase on forked workers, see
+:mod:`houghcad.parallel`), checks that both results are identical (segments, parameters, labels),
+and reports the median time per cloud of each and their ratio (the issue's figure: ≤ 0.65 at 2
+jobs). Run it on an otherwise idle machine: the parallel run needs the second core.
+
+The summary goes between the ``<!-- jobs:begin/end -->`` markers of BENCHMARKS.md, and a dated
+entry to the top of docs/benchmark-log.md, unless ``--no-write``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fit4cad import find_clouds, publish_section  # run from benchmarks/, beside fit4cad.py
+
+
+def _run(points: np.ndarray, n_jobs: int) -> tuple[float, str]:
+    from houghcad.pipeline import Segmenter
+
+    t = time.perf_counter()
+    result = Segmenter(seed=0, n_jobs=n_jobs).fit(points).result_
+    dt = time.perf_counter() - t
+    d = result.to_dict()
+    d.pop("timing")
+    return dt, json.dumps(d, sort_keys=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("dir", type=Path)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--limit", type=int, default=None, help="only the first N clouds")
+    ap.add_argument("--every", type=int, default=1, help="every K-th cloud only (a quick sample)")
+    ap.add_argument("--no-write", action="store_true")
+    a = ap.parse_args(argv)
+    from houghcad.io import read_points
+
+    clouds = find_clouds(a.dir)[::a.every][:a.limit]
+    _run(read_points(str(clouds[0][1])).points, 1)  # warm-up: numba's cache, imports
+    rows = []
+    for i, (name, path, _) in enumerate(clouds):
+        pts = read_points(str(path)).points
+        # Alternate which runs first: a cloud's first run pays the first touch of its memory.
+        if i % 2:
+            tn, rn = _run(pts, a.jobs)
+            t1, r1 = _run(pts, 1)
+        else:
+            t1, r1 = _run(pts, 1)
+            tn, rn = _run(pts, a.jobs)
+        rows.append(dict(name=name, n=len(pts), t1=t1, tn=tn, same=r1 == rn))
+        print(f"{name:<6} {len(pts):>6} pts  1 job {t1:6.2f} s  {a.jobs} jobs {tn:6.2f} s  "
+              f"x{tn / t1:.2f}  {'same' if r1 == rn else 'DIFFERENT'}", file=sys.stderr, flush=True)
+    t1 = np.array([r["t1"] for r in rows])
+    tn = np.array([r["tn"] for r in rows])
+    big = np.array([r["n"] >= 10_000 for r in rows])
+    ratio = float(np.median(tn) / np.median(t1))
+    same = sum(r["same"] for r in rows)
+    lines = [f"| run | median s per cloud | mean s per cloud | clouds ≥ 10,000 points: median s |",
+             "|---|---|---|---|",
+             f"| `n_jobs=1` | {np.median(t1):.2f} | {t1.mean():.2f} | {np.median(t1[big]) if big.any() else float('nan'):.2f} |",
+             f"| `n_jobs={a.jobs}` | {np.median(tn):.2f} | {tn.mean():.2f} | {np.median(tn[big]) if big.any() else float('nan'):.2f} |",
+             "",
+             f"- Median time with {a.jobs} jobs / with 1 job: **{ratio:.2f}** (target ≤ 0.65 at 2 jobs); "
+             f"per cloud, the median of the ratios: {np.median(tn / t1):.2f}; total time "
+             f"{tn.sum():.0f} s against {t1.sum():.0f} s.",
+             f"- Identical results (segments, parameters, labels, groups): {same} of {len(rows)} clouds."]
+    publish_section("jobs", "Both cores inside one cloud", "cloud_jobs.py", argv, [
+        f"- Clouds: {len(rows)}, one at a time in one process; the `Segmenter.fit` call timed with "
+        f"`n_jobs=1` and `n_jobs={a.jobs}` (families and clusters on forked workers).",
+    ], lines, not a.no_write, summary=[f"median {np.median(t1):.2f} s -> {np.median(tn):.2f} s "
+                                       f"(x{ratio:.2f}); identical on {same}/{len(rows)}"])
+    return 0 if same == len(rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

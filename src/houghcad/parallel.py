@@ -1,0 +1,231 @@
+"""Both cores inside one cloud (our extension; the paper notes that families and clusters are
+embarrassingly parallel).
+
+A run forks its :class:`Workers` once, right after preprocessing. Each worker holds the run's
+context as it was at the fork (the preprocessed cloud, its scales and thresholds), copy-on-write,
+so a task is only a list of point indices and the families' names, and only the candidates come
+back. Why processes, and why written here rather than taken from a library: the work is mostly
+Python-level (scipy's small least-squares fits, numpy on a few thousand points), so threads
+serialise on the GIL; ``concurrent.futures`` and ``joblib`` would pickle the whole cloud into
+every task, which costs more than a cluster's recognition.
+
+Each task is a pure function of its points, so its result is the one this process would compute,
+and results come back in task order: the output is the same for every number of jobs. Where
+forking is impossible (no ``fork`` start method, or inside a daemonic worker such as a Dask
+nanny's) there are no workers and everything runs in this process.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import multiprocessing.pool
+import os
+from dataclasses import dataclass, fields, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:  # the pipeline's modules import this one
+    from .context import Context
+    from .families import Family
+    from .state import Candidate
+
+#: A batch of tasks under this many points in all runs here: handing it out costs more.
+PARALLEL_MIN_POINTS = 100
+#: Evaluation tasks per worker: the peaks' costs vary, more tasks than workers even them out.
+EVALUATE_TASKS_PER_JOB = 3
+
+#: In a worker: the run's context at the fork and its families by name.
+_BASE: "tuple[Context, dict[str, Family]] | None" = None
+_SCALARS = (bool, int, float, str, np.integer, np.floating)
+#: In a worker: the last neighbour table built, keyed by its points and context.
+_VOTING: "tuple[tuple, Context] | None" = None
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the OS says, else the CPU count)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def resolve_jobs(n_jobs: int | None) -> int:
+    """``n_jobs`` as a count: None or 0 is every available core, -k is all but k - 1 (at least 1)."""
+    if n_jobs is None or n_jobs == 0:
+        return available_cores()
+    n = int(n_jobs)
+    return n if n > 0 else max(available_cores() + 1 + n, 1)
+
+
+def can_fork() -> bool:
+    """Whether this process can fork workers."""
+    return "fork" in mp.get_all_start_methods() and not mp.current_process().daemon
+
+
+def _task(job: tuple[str, np.ndarray, list[str], dict[str, Any], Any]) -> Any:
+    """In a worker: ``what`` of the families ``names`` on the points ``idx``, every one of them
+    free: a family's "propose"d primitives, the "evaluate"d candidates of the primitives
+    ``extra`` (``[(family index, primitive, coarse tolerance)]``), the "recognize"d ones, or a
+    splitting-phase "cluster"'s."""
+    from .recognize import evaluate, propose, recognize, voting_context
+    from .splitting import recognise_cluster
+
+    global _VOTING
+    what, idx, names, overrides, extra = job
+    assert _BASE is not None
+    base, by_name = _BASE
+    ctx = replace(base, **overrides)
+    fams = [by_name[n] for n in names]
+    if what in ("propose", "evaluate"):
+        # A family's vote and its peaks' evaluations read the same neighbour table: kept for the
+        # next task on the same points.
+        key = (idx.tobytes(), tuple(sorted(overrides.items())))
+        if _VOTING is None or _VOTING[0] != key:
+            _VOTING = (key, voting_context(idx, ctx))
+        vctx = _VOTING[1]
+        if what == "propose":
+            return propose(fams[0], idx, vctx)
+        return [_named(evaluate(fams[i], prim, idx, vctx, coarse)) for i, prim, coarse in extra]
+    avail = np.ones(len(ctx.pre.points), bool)
+    return _named((recognize if what == "recognize" else recognise_cluster)(idx, fams, ctx, avail))
+
+
+@dataclass(frozen=True)
+class _FamilyName:
+    """Stands for a family in a worker's candidates on their way back: a family need not pickle
+    (a user family built from sympy expressions does not)."""
+
+    name: str
+
+
+def _named(x: Any) -> Any:
+    """``x`` (candidates, in lists and tuples) with each family replaced by its name."""
+    from .state import Candidate
+
+    if isinstance(x, (list, tuple)):
+        return type(x)(_named(v) for v in x)
+    return replace(x, family=_FamilyName(x.family.name)) if isinstance(x, Candidate) else x
+
+
+def _rebind(x: Any, by_name: "dict[str, Family]") -> Any:
+    """``x`` (candidates, in lists and tuples) with this process's families in place of the
+    workers' copies."""
+    if isinstance(x, (list, tuple)):
+        return type(x)(_rebind(v, by_name) for v in x)
+    from .state import Candidate
+
+    return replace(x, family=by_name[x.family.name]) if isinstance(x, Candidate) else x
+
+
+class Workers:
+    """``n_jobs`` processes forked with the run's context ``ctx`` and ``families``; none when
+    ``n_jobs`` is 1 or forking is impossible. Close it (or use it as a context manager)."""
+
+    def __init__(self, ctx: "Context", families: "list[Family]", n_jobs: int):
+        global _BASE
+        self.base = ctx
+        self.by_name = {f.name: f for f in families}
+        self.pool = None
+        self.n_jobs = n_jobs
+        if n_jobs > 1 and can_fork():
+            _BASE = (ctx, self.by_name)
+            try:
+                self.pool = mp.get_context("fork").Pool(n_jobs)
+            finally:
+                _BASE = None  # only the children need it
+
+    def __enter__(self) -> "Workers":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.terminate()
+            self.pool.join()
+            self.pool = None
+
+    def _overrides(self, ctx: "Context") -> dict[str, Any] | None:
+        """The scalar fields in which ``ctx`` differs from the context at the fork, or None when
+        another field differs (the workers could not rebuild it)."""
+        out: dict[str, Any] = {}
+        for f in fields(ctx):
+            a, b = getattr(ctx, f.name), getattr(self.base, f.name)
+            if f.name == "workers" or a is b:
+                continue
+            if isinstance(a, _SCALARS) and isinstance(b, _SCALARS):
+                if a != b:
+                    out[f.name] = a
+                continue
+            return None
+        return out
+
+    def _payload(self, what: str, jobs: "list[tuple[np.ndarray, list[Family], Any]]",
+                 ctx: "Context") -> list[tuple] | None:
+        """The tasks of ``jobs`` for :func:`_task`, or None when they are not worth handing out or
+        cannot be rebuilt in the workers."""
+        if self.pool is None or len(jobs) < 2 or sum(len(j[0]) for j in jobs) < PARALLEL_MIN_POINTS:
+            return None
+        if any(self.by_name.get(f.name) is not f for j in jobs for f in j[1]):
+            return None
+        overrides = self._overrides(ctx)
+        if overrides is None:
+            return None
+        return [(what, np.asarray(idx), [f.name for f in fams], overrides, extra) for idx, fams, extra in jobs]
+
+    def run(self, what: str, jobs: "list[tuple[np.ndarray, list[Family], Any]]", ctx: "Context") -> list[Any] | None:
+        """For each ``(idx, families, extra)``, what ``what`` (see :func:`_task`) gives on the points
+        ``idx`` (all free), computed on the workers, in job order; None when the jobs are not worth
+        handing out or ``ctx`` cannot be rebuilt there (the caller then runs them itself)."""
+        payload = self._payload(what, jobs, ctx)
+        if payload is None:
+            return None
+        assert self.pool is not None
+        try:
+            return _rebind(self.pool.map(_task, payload, chunksize=1), self.by_name)
+        except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
+            return None
+
+    def candidates(self, idx: np.ndarray, fams: "list[Family]", ctx: "Context") -> "list[Candidate] | None":
+        """``recognize.candidates`` of the families on the points ``idx`` (all free), on the
+        workers: each family's vote, and as soon as a family's peaks are known, their evaluations,
+        dealt out in turn over a few tasks (a costly vote, the cylinders' on a whole cloud, then
+        runs beside the evaluation of the others' peaks). None as :meth:`run`."""
+        # The later families (cones, tori, the complex ones) cost the most: handed out first.
+        order = list(range(len(fams)))[::-1]
+        payload = self._payload("propose", [(idx, [fams[i]], None) for i in order], ctx)
+        if payload is None:
+            return None
+        assert self.pool is not None
+        tagged = [(i, job) for i, job in zip(order, payload)]
+        try:
+            return _rebind(self._vote_and_evaluate(tagged, fams, payload[0][1], payload[0][3]), self.by_name)
+        except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
+            return None
+
+    def _vote_and_evaluate(self, tagged: list, fams: "list[Family]", idx: np.ndarray,
+                           overrides: dict[str, Any]) -> list:
+        assert self.pool is not None
+        evaluations: dict[int, list[tuple[list[int], Any]]] = {}
+        n_peaks: dict[int, int] = {}
+        for i, props in self.pool.imap_unordered(_tagged_task, tagged):
+            pairs = [(0, prim, coarse) for prim, coarse in props]
+            n_peaks[i] = len(pairs)
+            n = max(1, min(len(pairs), EVALUATE_TASKS_PER_JOB * self.n_jobs))
+            evaluations[i] = [(list(range(j, len(pairs), n)),
+                               self.pool.apply_async(_task, (("evaluate", idx, [fams[i].name], overrides, pairs[j::n]),)))
+                              for j in range(n) if pairs[j::n]]
+        out: list = []
+        for i in range(len(fams)):
+            per: list = [None] * n_peaks[i]
+            for where, res in evaluations[i]:
+                for k, cs in zip(where, res.get()):
+                    per[k] = cs
+            out += [c for cs in per for c in cs]
+        return out
+
+
+def _tagged_task(tagged: tuple[int, tuple]) -> tuple[int, Any]:
+    return tagged[0], _task(tagged[1])

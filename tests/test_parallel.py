@@ -1,0 +1,97 @@
+"""Tests of houghcad.parallel: workers forked once per run give what this process computes, in
+job order; without fork (or with one job) there are no workers."""
+
+from __future__ import annotations
+
+import copy
+import multiprocessing as mp
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from houghcad import families, parallel, synth
+from houghcad.context import derive_context
+from houghcad.noise import CLEAN
+from houghcad.parallel import Workers, available_cores, can_fork, resolve_jobs
+from houghcad.preprocess import preprocess
+from houghcad.recognize import candidates, recognize
+from houghcad.splitting import recognise_cluster
+from houghcad.tolerances import Tolerances
+
+needs_fork = pytest.mark.skipif(not can_fork(), reason="no fork start method here")
+
+
+@pytest.fixture(scope="module")
+def run():
+    cloud = synth.block_with_hole_and_slot(seed=3, n_points=4000)
+    pre = preprocess(cloud.points)
+    ctx = derive_context(pre, len(cloud.points), Tolerances(), CLEAN)
+    return ctx, families.select("simple")
+
+
+def _same(a, b) -> None:
+    """Two lists of candidates are equal: families (the same objects), primitives, points."""
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert x.family is y.family
+        assert repr(x.prim) == repr(y.prim)
+        np.testing.assert_array_equal(x.indices, y.indices)
+        assert x.mfe == y.mfe
+
+
+@needs_fork
+def test_workers_compute_what_this_process_computes(run):
+    ctx, fams = run
+    n = len(ctx.pre.points)
+    avail = np.ones(n, bool)
+    halves = [np.arange(0, n // 2), np.arange(n // 2, n)]
+    lctx = replace(ctx, local=True, min_points=ctx.min_points + 5)  # scalar changes travel to the workers
+    with Workers(ctx, fams, 2) as w:
+        assert w.pool is not None
+        got = w.run("recognize", [(h, fams, None) for h in halves], lctx)
+        clusters = w.run("cluster", [(h, fams, None) for h in halves], lctx)
+        spread = w.candidates(halves[0], fams, lctx)
+    assert got is not None and clusters is not None and spread is not None
+    for h, g, c in zip(halves, got, clusters):
+        _same(g, recognize(h, fams, lctx, avail))
+        want = recognise_cluster(h, fams, lctx, avail)
+        _same(c[0], want[0])
+        assert (c[1] is None) == (want[1] is None)
+    _same(spread, candidates(halves[0], fams, lctx, avail))
+    assert w.pool is None  # closed
+
+
+@needs_fork
+def test_workers_decline_what_they_cannot_rebuild(run):
+    ctx, fams = run
+    jobs = [(np.arange(0, 1500), fams, None), (np.arange(1500, 3000), fams, None)]
+    with Workers(ctx, fams, 2) as w:
+        assert w.run("recognize", jobs, replace(ctx, neighbors=np.zeros((3, 2), int))) is None  # an array
+        assert w.run("recognize", jobs, replace(ctx, tol=Tolerances())) is None  # another object
+        other = families.select("plane")[0]
+        assert w.run("recognize", [(np.arange(1500), [copy.copy(other)], None), jobs[1]], ctx) is None  # foreign
+        assert w.run("recognize", jobs[:1], ctx) is None  # one job: not worth it
+        small = [(np.arange(10), fams, None), (np.arange(10, 20), fams, None)]
+        assert w.run("recognize", small, ctx) is None  # under PARALLEL_MIN_POINTS in all
+        assert w.candidates(np.arange(30), fams, replace(ctx, tol=Tolerances())) is None
+        assert w.run("recognize", jobs, ctx) is not None
+
+
+def test_one_job_or_no_fork_means_no_workers(run, monkeypatch):
+    ctx, fams = run
+    with Workers(ctx, fams, 1) as w:
+        assert w.pool is None and w.run("recognize", [(np.arange(2000), fams, None)] * 2, ctx) is None
+        assert w.candidates(np.arange(2000), fams, ctx) is None
+    monkeypatch.setattr(mp.current_process(), "_config", {**mp.current_process()._config, "daemon": True})
+    assert not can_fork()
+    with Workers(ctx, fams, 2) as w:
+        assert w.pool is None
+    assert parallel._BASE is None
+
+
+def test_resolve_jobs():
+    assert resolve_jobs(None) == resolve_jobs(0) == available_cores() >= 1
+    assert resolve_jobs(3) == 3
+    assert resolve_jobs(-1) == available_cores()
+    assert resolve_jobs(-1000) == 1
