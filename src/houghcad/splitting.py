@@ -56,20 +56,27 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
     lctx = replace(ctx, local=True)
     t = ctx.tol.splitting
     for _ in range(t.max_rounds):
-        rest = np.flatnonzero(seg.free)
+        free0 = seg.free
         found_any = False
-        cls = clusters(rest, ctx)
-        ahead = _recognised_ahead(cls, families, lctx, seg.free)
-        for cl, (got, pieces) in zip(cls, ahead):
+        cls = clusters(np.flatnonzero(free0), ctx)
+        seen = [cl[free0[cl]] for cl in cls]
+        ahead = _recognised_ahead(seen, families, lctx, free0)
+        for k, cl in enumerate(cls):
             avail = seg.free
             cl = cl[avail[cl]]
             if len(cl) < ctx.min_points:
                 continue
+            # Without workers each cluster is recognised when its turn comes
+            # (one swallowed by the segments before it costs nothing), on its
+            # points at the round's start all the same.
+            got, pieces = ahead[k] if ahead is not None else (recognize(seen[k], families, lctx, free0), None)
             found = _still_free(got, avail, ctx)
             if not found:
                 found = coaxial_bands(cl, families, seg, lctx)
-            if not found and pieces is not None:
-                found = _still_free(pieces, avail, ctx)
+            if not found and not got and len(seen[k]) >= t.ransac_min_size * ctx.min_points:
+                if ahead is None:
+                    pieces = ransac_recognised(seen[k], families, lctx, free0)
+                found = _still_free(pieces or [], avail, ctx)
             accept(found, seg, ctx)
             found_any |= bool(found)
             if found:
@@ -121,20 +128,20 @@ def recognise_cluster(cl: np.ndarray, families: list[Family], ctx: Context,
     return found, (ransac_recognised(cl, families, ctx, avail) if not found and big else None)
 
 
-def _recognised_ahead(cls: list[np.ndarray], families: list[Family], ctx: Context, free: np.ndarray) \
-        -> list[tuple[list[Candidate], list[Candidate] | None]]:
-    """What :func:`recognise_cluster` gives on each cluster's free points
-    (``free``, bool (n,)), on the run's workers when there are some."""
-    seen = [cl[free[cl]] for cl in cls]
+def _recognised_ahead(seen: list[np.ndarray], families: list[Family], ctx: Context, free: np.ndarray) \
+        -> list[tuple[list[Candidate], list[Candidate] | None]] | None:
+    """What :func:`recognise_cluster` gives on each cluster's points ``seen``
+    (free in ``free``, bool (n,)), computed on the run's workers; None when
+    there are none or it is not worth it."""
     todo = [s for s in seen if len(s) >= ctx.min_points]
     # Clusters come largest first: the costliest are handed out first. When
     # one cluster holds most of the points, it would keep one worker busy
-    # while the others idle: the clusters are recognised here in turn, each
-    # with its families and peaks spread over the workers instead.
+    # while the others idle: the clusters are recognised in turn instead,
+    # each with its families and peaks spread over the workers.
     spread = len(todo) >= 2 and len(todo[0]) <= CLUSTER_SHARE * sum(map(len, todo))
     got = ctx.workers.run("cluster", [(s, families, None) for s in todo], ctx) if ctx.workers and spread else None
     if got is None:
-        got = [recognise_cluster(s, families, ctx, free) for s in todo]
+        return None
     it = iter(got)
     return [next(it) if len(s) >= ctx.min_points else ([], None) for s in seen]
 
