@@ -4,6 +4,8 @@ job order; without fork (or with one job) there are no workers."""
 from __future__ import annotations
 
 import copy
+import signal
+import sys
 import multiprocessing as mp
 from dataclasses import replace
 
@@ -95,3 +97,17 @@ def test_resolve_jobs():
     assert resolve_jobs(3) == 3
     assert resolve_jobs(-1) == available_cores()
     assert resolve_jobs(-1000) == 1
+
+
+@needs_fork
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_workers_leave_ctrl_c_to_the_main_process(run):
+    """Ctrl-C reaches the whole process group: workers that died of it printed their own
+    'Process ForkPoolWorker-N:' lines after the CLI's one-line message."""
+    ctx, fams = run
+    with Workers(ctx, fams, 2) as w:
+        pids = [p.pid for p in w.pool._pool]
+        for pid in pids:
+            status = open(f"/proc/{pid}/status").read()
+            ignored = int(next(line for line in status.splitlines() if line.startswith("SigIgn:")).split()[1], 16)
+            assert ignored & (1 << (signal.SIGINT - 1))

@@ -20,6 +20,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import multiprocessing.pool
 import os
+import signal
 from dataclasses import dataclass, fields, replace
 from typing import TYPE_CHECKING, Any
 
@@ -131,7 +132,7 @@ class Workers:
         if n_jobs > 1 and can_fork():
             _BASE = (ctx, self.by_name)
             try:
-                self.pool = mp.get_context("fork").Pool(n_jobs)
+                self.pool = mp.get_context("fork").Pool(n_jobs, initializer=_ignore_interrupts)
             finally:
                 _BASE = None  # only the children need it
 
@@ -225,6 +226,12 @@ class Workers:
                     per[k] = cs
             out += [c for cs in per for c in cs]
         return out
+
+
+def _ignore_interrupts() -> None:
+    """In a worker: Ctrl-C reaches the whole process group; the main process handles it (and
+    terminates the workers), so a worker must not die of it with a traceback of its own."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _tagged_task(tagged: tuple[int, tuple]) -> tuple[int, Any]:
