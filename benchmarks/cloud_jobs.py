@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     big = np.array([r["n"] >= 10_000 for r in rows])
     ratio = float(np.median(tn) / np.median(t1))
     same = sum(r["same"] for r in rows)
-    lines = [f"| run | median s per cloud | mean s per cloud | clouds ≥ 10,000 points: median s |",
+    lines = ["| run | median s per cloud | mean s per cloud | clouds ≥ 10,000 points: median s |",
              "|---|---|---|---|",
              f"| `n_jobs=1` | {np.median(t1):.2f} | {t1.mean():.2f} | {np.median(t1[big]) if big.any() else float('nan'):.2f} |",
              f"| `n_jobs={a.jobs}` | {np.median(tn):.2f} | {tn.mean():.2f} | {np.median(tn[big]) if big.any() else float('nan'):.2f} |",

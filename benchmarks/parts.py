@@ -29,6 +29,15 @@ from complex import COMPOSITES, NEAREST_NOTE, _mean_or_dash, nearest_face_dsc, s
 from fit4cad import publish_section, run_cases
 
 
+def simple_parts() -> list[str]:
+    """The parts of ``synth.PARTS`` with simple surfaces only, as this benchmark runs them: not
+    the complex composites, the parts with many small faces nor the paper's part."""
+    from houghcad import synth
+
+    return [p for p in synth.PARTS if p not in COMPOSITES and p not in synth.SMALL_FACE_PARTS
+            and p not in synth.PAPER_PARTS]
+
+
 def run_part(args):
     name, seed, n_points, noise, families = args
     cloud, _, dt, m = segment_part(name, seed, n_points, noise, families)
@@ -48,10 +57,7 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--no-write", action="store_true")
     a = ap.parse_args(argv)
-    from houghcad import synth
-
-    parts = [p for p in synth.PARTS if p not in COMPOSITES and p not in synth.SMALL_FACE_PARTS
-             and p not in synth.PAPER_PARTS]
+    parts = simple_parts()
     noise = [float(x) for x in a.noise.split(",") if x.strip()]
     cases = [(p, s, a.points, nz, a.families) for nz in noise for p in parts for s in range(a.seeds)]
     rows = run_cases(run_part, cases, a.jobs, lambda r: (

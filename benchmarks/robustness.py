@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from houghcad import synth
 
-    from complex import COMPOSITES  # noqa: E402  (run from benchmarks/)
+    from parts import simple_parts  # run from benchmarks/, beside this script
 
     body: list[str] = []
     summary: list[str] = []
@@ -202,8 +202,7 @@ def main(argv: list[str] | None = None) -> int:
                      "segment's type. Errors (of the right-typed): the largest angle error and the largest "
                      "length error of each instance, as in `singles.py`; lengths as fractions of the diagonal.")
     if a.only != "singles":
-        parts = [p for p in synth.PARTS if p not in COMPOSITES and p not in synth.SMALL_FACE_PARTS
-                 and p not in synth.PAPER_PARTS]
+        parts = simple_parts()
         cases = [(p, s, a.part_points, k) for k in range(len(PART_KINDS)) for p in parts
                  for s in range(a.part_seeds)]
         rows = run_cases(run_part, cases, a.jobs, lambda r: (

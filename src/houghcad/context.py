@@ -45,9 +45,6 @@ class Context:
         What the run does differently on a noisy cloud.
     local : bool
         Voting on a cluster (the splitting phase), not the whole cloud.
-    n_jobs : int
-        Processes the independent work of a step may run on (:mod:`houghcad.parallel`); the
-        results do not depend on it.
     workers : Workers or None
         The run's forked workers (:class:`houghcad.parallel.Workers`), None outside a run.
     """
@@ -69,7 +66,6 @@ class Context:
     neighbors: np.ndarray | None = None
     tol: Tolerances = field(default_factory=Tolerances)
     policy: NoisePolicy = CLEAN
-    n_jobs: int = 1
     workers: Any = None
 
     @property
@@ -89,13 +85,13 @@ class Context:
 def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: NoisePolicy,
                    epsilon: float | None = None, min_points: int | None = None,
                    persistence: float = DEFAULT_PERSISTENCE,
-                   seed: int = 0, n_jobs: int = 1) -> Context:
+                   seed: int = 0) -> Context:
     """The run's scales from the point spacing and the estimated noise.
 
     ``epsilon``: the removal distance as a fraction of the diagonal (None:
     ``tol.scale.epsilon_taus`` × τ, or ``noisy_epsilon_taus`` × τ under the
     noisy policy); ``min_points``: the smallest segment
-    (None: from the number of points); ``n_jobs``: processes for independent work.
+    (None: from the number of points).
     """
     t = tol.scale
     s = pre.spacing
@@ -109,8 +105,7 @@ def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: No
                    link=max(t.link_spacings * s, t.link_reach * pre.reach) + t.link_sigmas * pre.noise,
                    cell=max(tau, t.cell_spacings * s), min_points=int(mp), max_radius=t.max_radius,
                    persistence=float(persistence), max_peaks=t.max_peaks, max_directions=t.max_directions,
-                   min_votes=float(mp), seed=int(seed), tol=tol, policy=policy,
-                   n_jobs=int(n_jobs))
+                   min_votes=float(mp), seed=int(seed), tol=tol, policy=policy)
 
 
 def on_surface(ctx: Context) -> float:

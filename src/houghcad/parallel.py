@@ -22,7 +22,7 @@ import multiprocessing.pool
 import os
 import signal
 from dataclasses import dataclass, fields, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -66,9 +66,9 @@ def can_fork() -> bool:
 
 def _task(job: tuple[str, np.ndarray, list[str], dict[str, Any], Any]) -> Any:
     """In a worker: ``what`` of the families ``names`` on the points ``idx``, every one of them
-    free: a family's "propose"d primitives, the "evaluate"d candidates of the primitives
-    ``extra`` (``[(family index, primitive, coarse tolerance)]``), the "recognize"d ones, or a
-    splitting-phase "cluster"'s."""
+    free: a family's "propose"d primitives, the "evaluate"d candidates of its primitives
+    ``extra`` (``[(primitive, coarse tolerance)]``), the "recognize"d ones, or a splitting-phase
+    "cluster"'s."""
     from .recognize import evaluate, propose, recognize, voting_context
     from .splitting import recognise_cluster
 
@@ -87,9 +87,10 @@ def _task(job: tuple[str, np.ndarray, list[str], dict[str, Any], Any]) -> Any:
         vctx = _VOTING[1]
         if what == "propose":
             return propose(fams[0], idx, vctx)
-        return [_named(evaluate(fams[i], prim, idx, vctx, coarse)) for i, prim, coarse in extra]
+        return _swap_families([evaluate(fams[0], prim, idx, vctx, coarse) for prim, coarse in extra], _FamilyName)
     avail = np.ones(len(ctx.pre.points), bool)
-    return _named((recognize if what == "recognize" else recognise_cluster)(idx, fams, ctx, avail))
+    return _swap_families((recognize if what == "recognize" else recognise_cluster)(idx, fams, ctx, avail),
+                          _FamilyName)
 
 
 @dataclass(frozen=True)
@@ -100,23 +101,14 @@ class _FamilyName:
     name: str
 
 
-def _named(x: Any) -> Any:
-    """``x`` (candidates, in lists and tuples) with each family replaced by its name."""
+def _swap_families(x: Any, family_of: "Callable[[str], Any]") -> Any:
+    """``x`` (candidates, in lists and tuples; anything else as it is) with each candidate's
+    family replaced by ``family_of(its name)``."""
     from .state import Candidate
 
     if isinstance(x, (list, tuple)):
-        return type(x)(_named(v) for v in x)
-    return replace(x, family=_FamilyName(x.family.name)) if isinstance(x, Candidate) else x
-
-
-def _rebind(x: Any, by_name: "dict[str, Family]") -> Any:
-    """``x`` (candidates, in lists and tuples) with this process's families in place of the
-    workers' copies."""
-    if isinstance(x, (list, tuple)):
-        return type(x)(_rebind(v, by_name) for v in x)
-    from .state import Candidate
-
-    return replace(x, family=by_name[x.family.name]) if isinstance(x, Candidate) else x
+        return type(x)(_swap_families(v, family_of) for v in x)
+    return replace(x, family=family_of(x.family.name)) if isinstance(x, Candidate) else x
 
 
 class Workers:
@@ -185,7 +177,7 @@ class Workers:
             return None
         assert self.pool is not None
         try:
-            return _rebind(self.pool.map(_task, payload, chunksize=1), self.by_name)
+            return _swap_families(self.pool.map(_task, payload, chunksize=1), self.by_name.__getitem__)
         except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
             return None
 
@@ -200,9 +192,10 @@ class Workers:
         if payload is None:
             return None
         assert self.pool is not None
-        tagged = [(i, job) for i, job in zip(order, payload)]
+        _, points, _, overrides, _ = payload[0]
         try:
-            return _rebind(self._vote_and_evaluate(tagged, fams, payload[0][1], payload[0][3]), self.by_name)
+            return _swap_families(self._vote_and_evaluate(list(zip(order, payload)), fams, points, overrides),
+                                  self.by_name.__getitem__)
         except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
             return None
 
@@ -212,7 +205,7 @@ class Workers:
         evaluations: dict[int, list[tuple[list[int], Any]]] = {}
         n_peaks: dict[int, int] = {}
         for i, props in self.pool.imap_unordered(_tagged_task, tagged):
-            pairs = [(0, prim, coarse) for prim, coarse in props]
+            pairs = list(props)
             n_peaks[i] = len(pairs)
             n = max(1, min(len(pairs), EVALUATE_TASKS_PER_JOB * self.n_jobs))
             evaluations[i] = [(list(range(j, len(pairs), n)),

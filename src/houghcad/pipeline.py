@@ -339,8 +339,9 @@ class Segmenter:
         from .io import validate_points
 
         points = validate_points(np.asarray(points), source)
-        if np.abs(points).max() > MAX_COORDINATE:
-            raise InputError(f"{source or 'input'}: coordinates up to {np.abs(points).max():.3g}; beyond "
+        top = float(np.abs(points).max())
+        if top > MAX_COORDINATE:
+            raise InputError(f"{source or 'input'}: coordinates up to {top:.3g}; beyond "
                              f"{MAX_COORDINATE:g} the fits' squared distances overflow, so rescale the cloud")
         if normals is not None:
             normals = np.asarray(normals, dtype=np.float64)
@@ -375,12 +376,13 @@ class Segmenter:
             (points[picked.indices], None if normals is None else normals[picked.indices])
         t0 = time.perf_counter()
         report("preprocess", 0.0)
+        jobs = resolve_jobs(self.n_jobs)
         pre = preprocess(work, work_normals, method=self.normals_method, seed=self.seed, noise=self.noise,
-                         workers=resolve_jobs(self.n_jobs))
+                         workers=jobs)
         ctx = self._context(pre, len(work), tol)
         timing["preprocess"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        with Workers(ctx, fams, ctx.n_jobs) as workers:
+        with Workers(ctx, fams, jobs) as workers:
             if workers.pool is not None:
                 timing["workers"] = time.perf_counter() - t0
             run = Run(replace(ctx, workers=workers), fams, voted, associator, report)
@@ -479,7 +481,7 @@ class Segmenter:
         except ValueError as exc:
             raise InputError(str(exc)) from None
         return derive_context(pre, n, tol, policy, epsilon=self.epsilon, min_points=self.min_points,
-                              persistence=self.persistence, seed=self.seed, n_jobs=resolve_jobs(self.n_jobs))
+                              persistence=self.persistence, seed=self.seed)
 
 
 def segment(points: np.ndarray, normals: np.ndarray | None = None, *, families="simple",

@@ -73,7 +73,7 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
             found = _still_free(got, avail, ctx)
             if not found:
                 found = coaxial_bands(cl, families, seg, lctx)
-            if not found and not got and len(seen[k]) >= t.ransac_min_size * ctx.min_points:
+            if not found and not got and _ransac_sized(seen[k], ctx):
                 if ahead is None:
                     pieces = ransac_recognised(seen[k], families, lctx, free0)
                 found = _still_free(pieces or [], avail, ctx)
@@ -124,8 +124,13 @@ def recognise_cluster(cl: np.ndarray, families: list[Family], ctx: Context,
     large enough, its RANSAC regions' (None otherwise): what the splitting
     loop needs of a cluster that depends on its points alone."""
     found = recognize(cl, families, ctx, avail)
-    big = len(cl) >= ctx.tol.splitting.ransac_min_size * ctx.min_points
-    return found, (ransac_recognised(cl, families, ctx, avail) if not found and big else None)
+    return found, (ransac_recognised(cl, families, ctx, avail) if not found and _ransac_sized(cl, ctx) else None)
+
+
+def _ransac_sized(cl: np.ndarray, ctx: Context) -> bool:
+    """Whether a cluster where recognition found nothing is large enough for the RANSAC fallback
+    (the splitting loop and the workers must agree on it)."""
+    return len(cl) >= ctx.tol.splitting.ransac_min_size * ctx.min_points
 
 
 def _recognised_ahead(seen: list[np.ndarray], families: list[Family], ctx: Context, free: np.ndarray) \
