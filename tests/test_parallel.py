@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import signal
 import sys
+import time
 import multiprocessing as mp
 from dataclasses import replace
 
@@ -105,9 +106,15 @@ def test_workers_leave_ctrl_c_to_the_main_process(run):
     """Ctrl-C reaches the whole process group: workers that died of it printed their own
     'Process ForkPoolWorker-N:' lines after the CLI's one-line message."""
     ctx, fams = run
+    def ignores_sigint(pid: int) -> bool:
+        status = open(f"/proc/{pid}/status").read()
+        ignored = int(next(line for line in status.splitlines() if line.startswith("SigIgn:")).split()[1], 16)
+        return bool(ignored & (1 << (signal.SIGINT - 1)))
+
     with Workers(ctx, fams, 2) as w:
         pids = [p.pid for p in w.pool._pool]
-        for pid in pids:
-            status = open(f"/proc/{pid}/status").read()
-            ignored = int(next(line for line in status.splitlines() if line.startswith("SigIgn:")).split()[1], 16)
-            assert ignored & (1 << (signal.SIGINT - 1))
+        # The pool returns before its workers have run their initializer: give them time to start.
+        deadline = time.monotonic() + 20.0
+        while not all(map(ignores_sigint, pids)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert all(map(ignores_sigint, pids))
