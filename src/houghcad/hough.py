@@ -56,11 +56,15 @@ class Grid:
     def cell_index(self, values: np.ndarray) -> np.ndarray:
         """Flat cell index of parameter vectors ``values`` (k, d); -1 outside T."""
         values = np.atleast_2d(values)
-        idx = np.floor((values - np.asarray(self.lower)) / self.width).astype(np.int64)
+        with np.errstate(invalid="ignore"):
+            x = np.floor((values - np.asarray(self.lower)) / self.width)
+        # NaN, inf and values beyond int64 fall outside, as in accumulate.
+        finite = np.all(np.abs(x) < 2.0 ** 62, axis=1)
+        idx = np.where(finite[:, None], x, -1.0).astype(np.int64)
         bins = np.asarray(self.bins)
         wrap = np.asarray(self.wrap if self.wrap is not None else (False,) * self.ndim)
         idx = np.where(wrap, np.mod(idx, bins), idx)
-        ok = np.all((idx >= 0) & (idx < bins), axis=1)
+        ok = finite & np.all((idx >= 0) & (idx < bins), axis=1)
         flat = np.full(len(values), -1, dtype=np.int64)
         if ok.any():
             flat[ok] = np.ravel_multi_index(tuple(idx[ok].T), self.bins)
@@ -85,20 +89,62 @@ def accumulate(grid: Grid, voter: np.ndarray, values: np.ndarray, weights: np.nd
     H : ndarray of float64, shape ``grid.bins``
         Each point adds its weight at most once to each cell it crosses.
     """
-    flat = grid.cell_index(values)
-    ok = flat >= 0
-    flat, voter = flat[ok], np.asarray(voter)[ok]
-    w = None if weights is None else np.asarray(weights, dtype=np.float64)[ok]
-    ncell = int(np.prod(grid.bins))
-    if len(flat) == 0:
-        return np.zeros(grid.bins)
-    # One vote per (point, cell): unique on the combined key.
-    key = voter.astype(np.int64) * ncell + flat
-    key, first = np.unique(key, return_index=True)
-    flat = key % ncell
-    w = None if w is None else w[first]
-    H = np.bincount(flat, weights=w, minlength=ncell).astype(np.float64)
+    values = np.ascontiguousarray(np.atleast_2d(values), dtype=np.float64)
+    voter = np.ascontiguousarray(voter, dtype=np.int64)
+    wrap = grid.wrap if grid.wrap is not None else (False,) * grid.ndim
+    w = np.ones(0) if weights is None else np.ascontiguousarray(weights, dtype=np.float64)
+    H = np.zeros(int(np.prod(grid.bins)), np.float64)
+    if len(voter):
+        # Samples come grouped by point from every Γ_P sampler; otherwise order them by point,
+        # stably (the first sample of a point in a cell carries its weight, as before).
+        order = np.zeros(0, np.int64) if _grouped(voter) else np.argsort(voter, kind="stable")
+        _vote(voter, values, np.asarray(grid.lower, np.float64), grid.width.astype(np.float64),
+              np.asarray(grid.bins, np.int64), np.asarray(wrap, np.bool_), w, order, H)
     return H.reshape(grid.bins)
+
+
+# Voting by hand in numba rather than numpy's unique on (point, cell) keys: that sorted every
+# sample and held several (k, d) index arrays, the bulk of a round's time and memory on big clouds.
+@numba.njit(cache=True)
+def _grouped(voter: np.ndarray) -> bool:
+    for i in range(1, voter.size):
+        if voter[i] < voter[i - 1]:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _vote(voter, values, lower, width, bins, wrap, weights, order, H):
+    """Add each sample's weight (1 when ``weights`` is empty) to its cell of the flat
+    accumulator H, once per (point, cell): samples are taken point by point (in ``order`` when
+    given), and a cell remembers the last point that voted in it."""
+    ncell = H.size
+    stamp = np.full(ncell, -1, np.int64)
+    d = values.shape[1]
+    big = 2.0 ** 62
+    for t in range(voter.size):
+        i = order[t] if order.size else t
+        flat = 0
+        inside = True
+        for j in range(d):
+            x = np.floor((values[i, j] - lower[j]) / width[j])
+            if not (abs(x) < big):  # NaN, inf, or far outside
+                inside = False
+                break
+            c = np.int64(x)
+            if wrap[j]:
+                c = c % bins[j]
+            elif c < 0 or c >= bins[j]:
+                inside = False
+                break
+            flat = flat * bins[j] + c
+        if not inside:
+            continue
+        # Voters are non-negative point indices, so the stamp's -1 is never a voter; a point's
+        # samples are consecutive, so an older stamp means this point has not voted here.
+        if stamp[flat] != voter[i]:
+            stamp[flat] = voter[i]
+            H[flat] += weights[i] if weights.size else 1.0
 
 
 @numba.njit(cache=True)
