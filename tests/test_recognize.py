@@ -136,3 +136,42 @@ def test_dbscan_empty_and_single():
     assert dbscan(np.empty((0, 3)), 0.1, 3).shape == (0,)
     assert dbscan(np.zeros((1, 3)), 0.1, 1).tolist() == [0]
     assert dbscan(np.zeros((1, 3)), 0.1, 2).tolist() == [-1]
+
+
+# ----------------------------------------------------------------------------- block votes
+
+POINTWISE = [name for name, fam in REGISTRY.items() if fam.pointwise]
+
+
+@pytest.mark.parametrize("name", POINTWISE)
+def test_a_pointwise_family_votes_the_same_in_blocks(name, monkeypatch):
+    """A family that declares ``pointwise`` must give each point the same Γ_P whatever other
+    points vote with it: its accumulator over small blocks equals the one-pass accumulator."""
+    from houghcad import recognize as rec
+    from houghcad.hough import accumulate
+
+    fam = REGISTRY[name]
+    cloud = synth.single(name if name in synth.SAMPLERS else "plane", seed=1, n_points=1500, noise=0.002)
+    ctx = replace(_context(cloud.points), local=True)  # placed as in a cluster's round
+    P, N = ctx.pre.points, ctx.pre.normals
+    placements = fam.placements(P, N, ctx)[:2]
+    assert placements
+    for pl in placements:
+        Pl, Nl = pl.local(P, N)
+        grid = fam.region(Pl, Nl, ctx)
+        voter, vals = fam.gamma(Pl, Nl, grid, ctx)
+        whole = accumulate(grid, voter, vals)
+        monkeypatch.setattr(rec, "VOTE_BLOCK", 97)
+        np.testing.assert_array_equal(rec.block_votes(fam, Pl, Nl, grid, ctx), whole)
+        assert whole.sum() > 0
+
+
+def test_a_stacked_family_cannot_be_pointwise():
+    from houghcad.errors import InputError
+    from houghcad.families.base import check
+
+    fam = REGISTRY["generalized_cylinder"]
+    assert fam.stacked
+    both = type("Both", (type(fam),), {"pointwise": True})()
+    with pytest.raises(InputError, match="stacked"):
+        check(both)

@@ -424,6 +424,10 @@ def refine_direction(d: np.ndarray, dirs: np.ndarray, max_angle: float, weights:
     return out if out @ d >= 0 else -out
 
 
+#: Points per block of normal lines voted at once.
+NORMAL_LINE_BLOCK = 8192
+
+
 def normal_line_peaks(Q: np.ndarray, M: np.ndarray, lower: np.ndarray, width: float, bins: int, smax: float,
                       persistence: float, min_votes: float, max_peaks: int) -> np.ndarray:
     """Points where many normal lines meet (circle or sphere centres).
@@ -449,10 +453,14 @@ def normal_line_peaks(Q: np.ndarray, M: np.ndarray, lower: np.ndarray, width: fl
     cw = width / bins
     s = np.arange(cw, smax, cw)
     s = np.concatenate([-s, s])
-    C = (Q[:, None, :] + s[None, :, None] * M[:, None, :]).reshape(-1, d)
-    voter = np.repeat(np.arange(len(Q)), len(s))
     g = Grid(tuple(lower), tuple(np.asarray(lower) + width), (bins,) * d)
-    H = smooth(accumulate(g, voter, C))
+    H = np.zeros(g.bins)
+    # Blocks of points bound the samples held at once (unit votes: the sum is exact).
+    for start in range(0, len(Q), NORMAL_LINE_BLOCK):
+        q, m = Q[start:start + NORMAL_LINE_BLOCK], M[start:start + NORMAL_LINE_BLOCK]
+        C = (q[:, None, :] + s[None, :, None] * m[:, None, :]).reshape(-1, d)
+        H += accumulate(g, np.repeat(np.arange(len(q)), len(s)), C)
+    H = smooth(H)
     pk, _ = persistent_peaks(H, persistence, max_peaks=max_peaks)
     pk = pk[H.ravel()[pk] >= min_votes]
     return g.cell_center(pk)

@@ -19,7 +19,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .context import Context
 from .families import Family, Primitive
-from .hough import accumulate, persistent_peaks, smooth
+from .hough import Grid, accumulate, persistent_peaks, smooth
 from .state import Candidate, SegmentRecord, Segmentation, mean_fitting_error
 from .tolerances import RecognitionTolerances
 
@@ -210,16 +210,23 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
     for pl in fam.placements(P, N, ctx):
         Pl, Nl = pl.local(P, N)
         grid = fam.region(Pl, Nl, ctx)
-        voter, vals = fam.gamma(Pl, Nl, grid, ctx)
-        if len(voter) == 0:
-            continue
-        H = smooth(accumulate(grid, voter, vals), grid.wrap)
+        if fam.pointwise:
+            voter = vals = None
+            H = block_votes(fam, Pl, Nl, grid, ctx)
+            if not H.any():
+                continue
+        else:
+            voter, vals = fam.gamma(Pl, Nl, grid, ctx)
+            if len(voter) == 0:
+                continue
+            H = accumulate(grid, voter, vals)
+        H = smooth(H, grid.wrap)
         # A complex family's candidate costs tens of milliseconds of nonlinear
         # fits; its surface is one of the most persistent peaks.
         cap = ctx.max_peaks if fam.role == "simple" else min(ctx.max_peaks, ctx.tol.recognition.complex_max_peaks)
         pk, _ = persistent_peaks(H, ctx.persistence, grid.wrap, max_peaks=cap)
         pk = pk[H.ravel()[pk] >= ctx.min_votes]
-        if fam.stacked and not ctx.local and len(pk):
+        if fam.stacked and not ctx.local and len(pk) and voter is not None:
             # A surface that shares its placement with a larger one (two
             # generalised cylinders on one directrix and axis) votes a lower
             # peak, and the cones or bands between them fill the valley: its
@@ -232,6 +239,24 @@ def propose(fam: Family, idx: np.ndarray, ctx: Context) -> list[tuple[Primitive,
             if prim is not None and fam.valid(prim, ctx):
                 out.append((prim, fam.coarse_tolerance(grid, Pl, ctx)))
     return out
+
+
+#: Points per block when a pointwise family votes: bounds the Γ_P samples (and their cell
+#: indices) held at once; the accumulator is the same for any block size.
+VOTE_BLOCK = 8192
+
+
+def block_votes(fam: Family, Pl: np.ndarray, Nl: np.ndarray, grid: Grid, ctx: Context) -> np.ndarray:
+    """The accumulator (``grid.bins``) of a pointwise family's votes (``Family.pointwise``) from
+    the points Pl (m, 3) with normals Nl (m, 3), taken over blocks of VOTE_BLOCK points. Unit
+    votes sum exactly, so it equals one accumulation over all the points."""
+    H = np.zeros(grid.bins)
+    for start in range(0, len(Pl), VOTE_BLOCK):
+        stop = start + VOTE_BLOCK
+        voter, vals = fam.gamma(Pl[start:stop], Nl[start:stop], grid, ctx)
+        if len(voter):
+            H += accumulate(grid, voter, vals)
+    return H
 
 
 def _beside_top(fam: Family, pl, grid, H: np.ndarray, pk: np.ndarray, P: np.ndarray, Pl: np.ndarray,

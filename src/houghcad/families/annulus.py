@@ -288,6 +288,7 @@ class Annulus(Family):
     role = "complex"
     precedence = 7
     search = "cluster"
+    pointwise = True
     order = 100
     color = (128, 128, 128)  # grey
     type_code = 12

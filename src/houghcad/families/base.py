@@ -150,6 +150,11 @@ class Family:
     #: sizes (the sections of a stepped shaft on one axis and directrix):
     #: the whole-cloud vote then also seeks peaks beside the top one.
     stacked: ClassVar[bool] = False
+    #: Whether Γ_P of a point depends on that point (and the grid) alone, not on the
+    #: other points: then the votes are taken over blocks of points, and the samples
+    #: held at once stay bounded however big the cloud (a cone's or torus's Γ_P has a
+    #: sample per bin of a swept parameter: hundreds per point).
+    pointwise: ClassVar[bool] = False
     #: Name of the family this one specialises (same surface, plus a boundary
     #: shape: an annulus is a plane bounded by two circles). The two explain
     #: the points equally well and ties go to the simpler one, so when both
@@ -251,7 +256,7 @@ REGISTRY: dict[str, Family] = {}
 
 def check(fam: Family) -> None:
     """Raise :class:`InputError` when a family's declared attributes are not
-    valid (name, role, search, colour, type code, sampler)."""
+    valid (name, role, search, colour, type code, sampler, stacked with pointwise)."""
     if not isinstance(fam.name, str) or not fam.name:
         raise InputError(f"{type(fam).__name__}: a family needs a non-empty name")
     if fam.name in SELECTION_WORDS:
@@ -267,6 +272,10 @@ def check(fam: Family) -> None:
     code = fam.type_code
     if code is not None and not (isinstance(code, int) and code >= 1):
         raise InputError(f"family {fam.name!r}: type_code must be None or an int >= 1, got {code!r}")
+    if fam.stacked and fam.pointwise:
+        # The search beside the top peak withdraws votes sample by sample, which block votes
+        # do not keep.
+        raise InputError(f"family {fam.name!r}: a stacked family cannot be pointwise")
     if fam.sampler is not None and not isinstance(fam.sampler, Sampler):
         raise InputError(f"family {fam.name!r}: sampler must be None or a Sampler, got {fam.sampler!r}")
 

@@ -82,6 +82,7 @@ class Cone(Family):
     role = "simple"
     precedence = 3
     search = "cluster"
+    pointwise = True
     order = 40
     color = (35, 70, 230)  # blue
     type_code = 3

@@ -90,6 +90,7 @@ class Cylinder(Family):
     role = "simple"
     precedence = 1
     search = "whole"
+    pointwise = True
     order = 20
     color = (30, 160, 45)  # green
     type_code = 2

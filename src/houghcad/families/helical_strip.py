@@ -111,6 +111,7 @@ class HelicalStrip(Family):
     #: one linear complex: otherwise planes and cylinders take the strip's bands
     #: there (5 noisy single instances: 0/5 recognised, 5/5 with it).
     search = "whole"
+    pointwise = True
     order = 90
     color = (110, 60, 200)  # violet
     type_code = 11

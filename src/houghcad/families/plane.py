@@ -69,6 +69,7 @@ class Plane(Family):
     role = "simple"
     precedence = 0
     search = "whole"
+    pointwise = True
     order = 10
     color = (228, 26, 28)  # red
     type_code = 1

@@ -70,6 +70,7 @@ class Sphere(Family):
     role = "simple"
     precedence = 2
     search = "whole"
+    pointwise = True
     order = 30
     color = (200, 40, 200)  # magenta
     type_code = 4

@@ -100,6 +100,7 @@ class Torus(Family):
     role = "simple"
     precedence = 4
     search = "cluster"
+    pointwise = True
     order = 50
     color = (0, 0, 0)  # black
     type_code = 5
