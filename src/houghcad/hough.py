@@ -95,35 +95,34 @@ def accumulate(grid: Grid, voter: np.ndarray, values: np.ndarray, weights: np.nd
     w = np.ones(0) if weights is None else np.ascontiguousarray(weights, dtype=np.float64)
     H = np.zeros(int(np.prod(grid.bins)), np.float64)
     if len(voter):
+        args = (voter, values, np.asarray(grid.lower, np.float64), grid.width.astype(np.float64),
+                np.asarray(grid.bins, np.int64), np.asarray(wrap, np.bool_), w)
         # Samples come grouped by point from every Γ_P sampler; otherwise order them by point,
-        # stably (the first sample of a point in a cell carries its weight, as before).
-        order = np.zeros(0, np.int64) if _grouped(voter) else np.argsort(voter, kind="stable")
-        _vote(voter, values, np.asarray(grid.lower, np.float64), grid.width.astype(np.float64),
-              np.asarray(grid.bins, np.int64), np.asarray(wrap, np.bool_), w, order, H)
+        # stably (the first sample of a point in a cell carries its weight).
+        if not _vote(*args, np.zeros(0, np.int64), H):
+            H[:] = 0.0
+            _vote(*args, np.argsort(voter, kind="stable"), H)
     return H.reshape(grid.bins)
 
 
 # Voting by hand in numba rather than numpy's unique on (point, cell) keys: that sorted every
 # sample and held several (k, d) index arrays, the bulk of a round's time and memory on big clouds.
 @numba.njit(cache=True)
-def _grouped(voter: np.ndarray) -> bool:
-    for i in range(1, voter.size):
-        if voter[i] < voter[i - 1]:
-            return False
-    return True
-
-
-@numba.njit(cache=True)
 def _vote(voter, values, lower, width, bins, wrap, weights, order, H):
     """Add each sample's weight (1 when ``weights`` is empty) to its cell of the flat
-    accumulator H, once per (point, cell): samples are taken point by point (in ``order`` when
-    given), and a cell remembers the last point that voted in it."""
+    accumulator H, once per (point, cell): samples are taken in ``order`` (when given, else as
+    they come), and a cell remembers the last point that voted in it. Returns False, leaving H
+    partly filled, when the points' indices decrease along that order."""
     ncell = H.size
     stamp = np.full(ncell, -1, np.int64)
     d = values.shape[1]
     big = 2.0 ** 62
+    last = -1
     for t in range(voter.size):
         i = order[t] if order.size else t
+        if voter[i] < last:
+            return False
+        last = voter[i]
         flat = 0
         inside = True
         for j in range(d):
@@ -145,6 +144,7 @@ def _vote(voter, values, lower, width, bins, wrap, weights, order, H):
         if stamp[flat] != voter[i]:
             stamp[flat] = voter[i]
             H[flat] += weights[i] if weights.size else 1.0
+    return True
 
 
 @numba.njit(cache=True)
