@@ -115,6 +115,43 @@ def test_ply_big_endian(tmp_path, cloud):
     np.testing.assert_allclose(pc.normals, nrm, atol=1e-6)
 
 
+def test_big_binary_ply_is_memory_mapped_with_the_same_result(tmp_path, cloud, monkeypatch):
+    from houghcad.io import ply as ply_io
+
+    pts, nrm = cloud
+    rng = np.random.default_rng(0)
+    vertex = np.zeros(N, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("nx", "f4"), ("ny", "f4"), ("nz", "f4"),
+                                ("intensity", "u2")])
+    for i, k in enumerate("xyz"):
+        vertex[k] = pts[:, i]
+        vertex["n" + k] = nrm[:, i]
+    vertex["intensity"] = rng.integers(0, 60000, N)
+    path = tmp_path / "big.ply"
+    PlyData([PlyElement.describe(vertex, "vertex")], text=False).write(str(path))
+    before = path.read_bytes()
+    read = read_points(path)
+    calls = []
+    mapped = ply_io.read_ply_mapped
+    monkeypatch.setattr(ply_io, "read_ply_mapped", lambda *a: calls.append(a) or mapped(*a))
+    monkeypatch.setattr(ply_io, "MAP_BYTES", 0)  # every binary PLY counts as big
+    got = read_points(path)
+    assert calls
+    np.testing.assert_array_equal(got.points, read.points)
+    np.testing.assert_array_equal(got.normals, read.normals)
+    np.testing.assert_array_equal(got.fields["intensity"], vertex["intensity"])
+    # Plain arrays, not views of the mapped file, which is left as it was.
+    assert type(got.points) is np.ndarray and type(got.fields["intensity"]) is np.ndarray
+    assert path.read_bytes() == before
+    # A body cut short, or a header announcing more rows than the body holds: one-line errors.
+    path.write_bytes(before[: len(before) - 5])
+    with pytest.raises(InputError, match="PLY"):
+        read_points(path)
+    head = before[: before.index(b"end_header")].replace(f"element vertex {N}".encode(), b"element vertex 99999999")
+    path.write_bytes(head + before[before.index(b"end_header"):])
+    with pytest.raises(InputError, match="more than the file"):
+        read_points(path)
+
+
 def test_ply_detected_by_content_whatever_the_extension(tmp_path, cloud):
     pts, _ = cloud
     path = _ply(tmp_path / "c.xyz", pts, None, text=False)

@@ -8,7 +8,10 @@ numeric scalar properties are kept as the cloud's ``fields``.
 from __future__ import annotations
 
 import io
+import mmap
+import os
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -21,14 +24,20 @@ def is_ply(head: bytes, ext: str) -> bool:
     return head.startswith(b"ply") and head[3:4] in (b"\n", b"\r")
 
 
-def _check_counts(ply_data: type, data: bytes, source: str) -> None:
+#: Binary PLY files of this size (bytes) or more are read through a read-only memory map: their
+#: body is not copied into memory first (the whole file, then plyfile's parse of it).
+MAP_BYTES = 32 * 2**20
+
+
+def _check_counts(ply_data: type, data: bytes, source: str, size: int | None = None) -> None:
     """Fail fast when the header announces more rows than the body can hold.
 
     plyfile allocates the announced rows before reading them and loops over them one by one in
     binary files, so ``element vertex 1000000000000`` would allocate terabytes, and an element
     without properties would loop (nearly) forever on a few bytes. Every ascii row takes at
     least a line, every binary row at least its fixed-size properties and list lengths (and is
-    counted as one byte when it has none).
+    counted as one byte when it has none). ``size``: the whole file's size in bytes when ``data``
+    holds only its header.
     """
     from plyfile import PlyListProperty
 
@@ -37,11 +46,13 @@ def _check_counts(ply_data: type, data: bytes, source: str) -> None:
         return
     stream = io.BytesIO(data)
     header = parse_header(stream)  # raises on a malformed header (reported by the caller)
-    body = data[stream.tell():]
-    if header.text:
+    if size is not None:
+        room, unit = size - stream.tell(), "bytes"  # binary: the mapped reader reads no ascii
+    elif header.text:
+        body = data[stream.tell():]
         room, unit = body.count(b"\n") + body.count(b"\r") + 1, "lines"
     else:
-        room, unit = len(body), "bytes"
+        room, unit = len(data) - stream.tell(), "bytes"
     needed = 0
     for element in header.elements:
         if element.count < 0:
@@ -72,6 +83,42 @@ def read_ply(data: bytes, source: str) -> Parsed:
         raise
     except Exception as exc:  # plyfile raises assorted types on malformed files
         raise InputError(f"{source}: cannot parse PLY file ({one_line(exc)})") from None
+    return _vertices(ply, source)
+
+
+def read_ply_mapped(path: Path, source: str) -> Parsed | None:
+    """A binary PLY file of at least :data:`MAP_BYTES` through a read-only memory map; None for
+    smaller files, ascii ones and files that are not PLY (the caller reads their bytes)."""
+    from plyfile import PlyData
+
+    try:
+        if os.path.getsize(path) < MAP_BYTES:
+            return None
+        with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            if not is_ply(mm[:8], ""):
+                return None
+            end = mm.find(b"end_header", 0, 1 << 20)
+            stop = mm.find(b"\n", end) if end >= 0 else -1
+            header, size = mm[:stop + 1] if stop >= 0 else mm[:1 << 20], len(mm)
+    except (OSError, ValueError):  # ValueError: an empty file cannot be mapped
+        return None  # the bytes reader reports it
+    if b"format ascii" in header:
+        return None
+    try:
+        _check_counts(PlyData, header, source, size=size)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ply = PlyData.read(str(path), mmap="r")  # read-only: the input is never modified
+    except InputError:
+        raise
+    except Exception as exc:  # plyfile raises assorted types on malformed files
+        raise InputError(f"{source}: cannot parse PLY file ({one_line(exc)})") from None
+    return _vertices(ply, source)
+
+
+def _vertices(ply, source: str) -> Parsed:
+    """Points (n, 3) float64, normals and the other numeric scalar fields (copies) of a parsed
+    PLY's vertex element."""
     elements = {el.name: el for el in ply.elements}
     vertex = elements.get("vertex")
     if vertex is None:
@@ -89,6 +136,6 @@ def read_ply(data: bytes, source: str) -> Parsed:
     normals, names = pick_normals({k: arr[v] for k, v in props.items()})
     used = {"x", "y", "z", *names}
     # The vertex's other scalar properties (intensity, colour ...) go through to the outputs.
-    fields = {props[k]: np.asarray(arr[props[k]]) for k in props
+    fields = {props[k]: np.array(arr[props[k]]) for k in props
               if k not in used and np.asarray(arr[props[k]]).dtype.kind in "iufb"}
     return points, normals, fields

@@ -190,23 +190,16 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None, *, scan: i
         fail :func:`validate_points`.
     """
     source = str(path)
-    data = _read_bytes(Path(path), source)
-    if not data.strip():
-        raise InputError(f"{source}: file is empty")
-    if fmt is None:
-        fmt = detect_format(source, data)
-    else:
+    if fmt is not None:
         fmt = fmt.lower().lstrip(".")
         if fmt not in FORMATS:
             raise InputError(f"{source}: unknown format {fmt!r} (expected one of {', '.join(FORMATS)})")
     # Arbitrary bytes make arbitrary floats (signalling NaNs, overflowing casts): NaN and inf are
     # reported by validate_points, not as numpy warnings on stderr.
-    reader = _BY_NAME[fmt]
-    if scan is not None and not reader.scans:
-        kinds = ", ".join(f.name.upper() for f in FORMAT_TABLE if f.scans)
-        raise InputError(f"{source}: a scan can be chosen in {kinds} files only")
     with np.errstate(all="ignore"):
-        parsed = reader.read(data, source, scan=scan) if reader.scans else reader.read(data, source)
+        parsed = ply.read_ply_mapped(Path(path), source) if fmt in (None, "ply") and scan is None else None
+        if parsed is None:
+            parsed = _read_parsed(Path(path), source, fmt, scan)
         points, normals = parsed[0], parsed[1]
         fields = dict(parsed[2]) if len(parsed) > 2 else {}
         dropped = 0
@@ -214,6 +207,20 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None, *, scan: i
             points, normals, fields, dropped = _drop_invalid(points, normals, fields)
         points, normals = validate_points(points, source, normals, return_normals=True)
     return PointCloud(points=points, normals=normals, source=source, fields=fields, dropped=dropped)
+
+
+def _read_parsed(path: Path, source: str, fmt: str | None, scan: int | None) -> tuple:
+    """The file's bytes through its format's reader (detected when ``fmt`` is None)."""
+    data = _read_bytes(path, source)
+    if not data.strip():
+        raise InputError(f"{source}: file is empty")
+    if fmt is None:
+        fmt = detect_format(source, data)
+    reader = _BY_NAME[fmt]
+    if scan is not None and not reader.scans:
+        kinds = ", ".join(f.name.upper() for f in FORMAT_TABLE if f.scans)
+        raise InputError(f"{source}: a scan can be chosen in {kinds} files only")
+    return reader.read(data, source, scan=scan) if reader.scans else reader.read(data, source)
 
 
 def _drop_invalid(points: np.ndarray, normals: np.ndarray | None, fields: dict[str, np.ndarray]) \
