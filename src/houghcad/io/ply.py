@@ -130,7 +130,7 @@ def _vertices(ply, source: str) -> Parsed:
         raise InputError(f"{source}: no points")
     arr = vertex.data
     try:
-        points = np.column_stack([arr[props[k]] for k in "xyz"]).astype(np.float64)
+        points = np.column_stack([arr[props[k]] for k in "xyz"]).astype(np.float64, copy=False)
     except (TypeError, ValueError):
         raise InputError(f"{source}: PLY x, y, z properties are not numeric") from None
     normals, names = pick_normals({k: arr[v] for k, v in props.items()})

@@ -374,6 +374,10 @@ def _read_bytes(path: Path, source: str) -> bytes:
         raise InputError(f"{source}: cannot read file ({exc.strerror or exc})") from None
 
 
+#: Rows per block of the degeneracy test's QR factorisations.
+_QR_ROWS = 65536
+
+
 def _degeneracy(pts: np.ndarray) -> str | None:
     """Describe a linear or point-like cloud, or None when it spans a surface (a flat cloud does:
     it comes out as one plane).
@@ -387,9 +391,13 @@ def _degeneracy(pts: np.ndarray) -> str | None:
         return "all points are identical"
     # Scaled to [-1, 1] first: near the float64 limit the sums, differences and LAPACK's own
     # squares would overflow (to a wrong answer and a LAPACK complaint on stderr).
-    scaled = pts / np.abs(pts).max()
-    centred = scaled - scaled.mean(axis=0)
-    s = np.linalg.svd(centred, compute_uv=False)  # descending, shape (3,)
+    top = np.abs(pts).max()
+    mean = sum(np.sum(pts[i:i + _QR_ROWS] / top, axis=0) for i in range(0, len(pts), _QR_ROWS)) / len(pts)
+    # The singular values of the centred points, block by block (tall-skinny QR: those of the
+    # stacked blocks' R factors are the whole matrix's), so that no (N, 3) copy is made.
+    rs = [np.linalg.qr(pts[i:i + _QR_ROWS] / top - mean, mode="r") for i in range(0, len(pts), _QR_ROWS)]
+    s = np.linalg.svd(np.linalg.qr(np.vstack(rs), mode="r") if len(rs) > 1 else rs[0],
+                      compute_uv=False)  # descending, shape (3,)
     if s[0] == 0.0:
         return "all points are identical"
     if s[1] / s[0] < _DEGENERATE_RTOL:
