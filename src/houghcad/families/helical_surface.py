@@ -32,6 +32,12 @@ MAX_STARTS = 4
 #: Half-width of each n's window of k1 around p/n (relative): the complex's
 #: pitch comes out 1–6 % low on noisy clouds (smoothed normals).
 K1_WINDOW = 0.14
+#: Smallest quarter period of a thread, in inlier distances τ. Every point lies within a quarter
+#: period of a flank, axially: a profile that fine explains any points near its band, as well as
+#: the noise does, and the points cannot tell it apart. Measured at 0.5 % noise: ghost threads fitted
+#: to the helical strips and bands of the screw part at 0.4-0.6; the random threads that are
+#: recognised at 0.9 and above, those that are not at 0.8 and below (too fine for their sampling).
+RESOLVED_QUARTER_TAUS = 0.75
 #: Residual evaluations of the orthogonal-distance refinement after the Sampson fit (each
 #: finds every point's foot): it starts close, a few Gauss–Newton steps.
 ORTHOGONAL_EVALUATIONS = 20
@@ -272,9 +278,10 @@ class HelicalSurface(Family):
         p = prim.params
         R1, R2, k1, n = p["R1"], p["R2"], p["k1"], int(p["n"])
         # A thread shallower than 4 % of its radius is a cylinder; a period beyond twice the
-        # radius (k1 > R2, period > 2π R2) is a bulge of a surface of revolution, not a thread.
+        # radius (k1 > R2, period > 2π R2) is a bulge of a surface of revolution, not a thread;
+        # a profile whose quarter period is within about τ is unresolved (RESOLVED_QUARTER_TAUS).
         return (0 < R1 < R2 < ctx.max_radius and R2 - R1 >= 0.04 * R2 and 0 < k1 <= R2
-                and 1 <= abs(n) <= MAX_STARTS + 2)
+                and 1 <= abs(n) <= MAX_STARTS + 2 and TAU * k1 / 4 >= RESOLVED_QUARTER_TAUS * ctx.tau)
 
     def fit(self, prim, P, N):
         if len(P) < 16:
