@@ -124,3 +124,19 @@ def test_fit_does_not_flatten_a_deep_fine_thread_under_noise(seed):
     assert abs(fit.params["R1"] / R1 - 1) < 0.012
     assert abs(fit.params["R2"] - 1) < 0.008
     assert abs(fit.params["k1"] / k1 - 1) < 0.01
+
+
+def test_a_thread_finer_than_the_inlier_band_is_not_valid():
+    from types import SimpleNamespace
+
+    from houghcad.families.helical_surface import RESOLVED_QUARTER_TAUS
+
+    ctx = SimpleNamespace(tau=0.01, max_radius=1.0)
+
+    def thread(period: float):
+        return from_world({"axis_point": [0, 0, 0], "axis": [0, 0, 1], "ref_direction": [1, 0, 0], "R1": 0.3,
+                           "R2": 0.5, "n": 2, "k1": period / (2 * np.pi), "k2": 0.0})
+
+    # Every point lies within a quarter period of a flank: below the band, any point fits.
+    assert not FAM.valid(thread(4 * 0.5 * RESOLVED_QUARTER_TAUS * ctx.tau), ctx)
+    assert FAM.valid(thread(4 * 1.5 * RESOLVED_QUARTER_TAUS * ctx.tau), ctx)
