@@ -125,8 +125,8 @@ def main(argv: list[str] | None = None) -> int:
              "",
              f"- Median wall time per cloud, houghcad's against CGAL's: **{ratio:.2f}×** (target ≤ 1.5×); "
              f"per cloud, the median of the ratios: {np.median(h / c):.2f}×.",
-             f"- DSC: houghcad on the faces of its JSON, CGAL on its shapes (a failure scores nothing and is "
-             f"left out of the mean)."]
+             "- DSC: houghcad on the faces of its JSON, CGAL on its shapes (a failure scores nothing and is "
+             "left out of the mean)."]
     publish_section("cgal", "Fit4CAD clouds against CGAL, process start included", "fit4cad_cgal.py", argv, [
         f"- Clouds: {len(rows)}, one at a time; each tool in a fresh process per cloud, its wall time "
         "from process start to exit (houghcad: reading the Fit4CAD text file and writing the JSON included; "
