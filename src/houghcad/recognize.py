@@ -249,7 +249,11 @@ VOTE_BLOCK = 8192
 def block_votes(fam: Family, Pl: np.ndarray, Nl: np.ndarray, grid: Grid, ctx: Context) -> np.ndarray:
     """The accumulator (``grid.bins``) of a pointwise family's votes (``Family.pointwise``) from
     the points Pl (m, 3) with normals Nl (m, 3), taken over blocks of VOTE_BLOCK points. Unit
-    votes sum exactly, so it equals one accumulation over all the points."""
+    votes sum exactly, so it equals one accumulation over all the points. A family that votes
+    directly (:meth:`Family.votes`) does so instead."""
+    direct = fam.votes(Pl, Nl, grid, ctx)
+    if direct is not None:
+        return direct
     H = np.zeros(grid.bins)
     for start in range(0, len(Pl), VOTE_BLOCK):
         stop = start + VOTE_BLOCK

@@ -173,6 +173,13 @@ class Family:
         """Samples of Γ_P: (voter index (k,), parameter vectors (k, d))."""
         raise NotImplementedError
 
+    def votes(self, Pl: np.ndarray, Nl: np.ndarray, grid: Grid, ctx) -> np.ndarray | None:
+        """The accumulator (``grid.bins``) of the points' votes computed directly, for a pointwise
+        family whose Γ_P has a closed form per bin of a swept parameter: sampling and voting in
+        one pass, without holding the samples. None (the default): :meth:`gamma` is sampled and
+        accumulated over blocks of points."""
+        return None
+
     def primitive(self, values: np.ndarray, placement: Placement) -> Primitive | None:
         raise NotImplementedError
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -119,6 +120,14 @@ class Cone(Family):
         vals = np.stack([np.broadcast_to(b, dz.shape)[ok], alpha[ok]], axis=1)
         return voter, vals
 
+    def votes(self, Pl, Nl, grid, ctx):
+        # The sweep of gamma, voted as it goes: a point's samples fall in distinct apex-height
+        # bins, so each is a vote of its own (one per point and cell).
+        H = np.zeros(grid.bins)
+        lower, width = np.asarray(grid.lower, float), grid.width.astype(float)
+        _sweep_votes(Pl[:, 2].astype(float), np.hypot(Pl[:, 0], Pl[:, 1]), grid.centers(0), lower[1], width[1], H)
+        return H
+
     def primitive(self, values, placement):
         b, alpha = float(values[0]), float(values[1])
         a = placement.R[2]
@@ -192,3 +201,19 @@ class Cone(Family):
 
     def frame(self, prim):
         return Frame("point", np.asarray(prim.params["apex"], float), unit(prim.params["axis"]), oriented=True)
+
+
+# By hand in numba: gamma's (n, bins) samples are 200 MB per 100k points, and voting them
+# afterwards reads them again.
+@numba.njit(cache=True)
+def _sweep_votes(z: np.ndarray, rho: np.ndarray, b: np.ndarray, lo: float, w: float, H: np.ndarray) -> None:
+    """Add to H (len(b), k) a vote per point (z, rho (n,)) and apex height b[j] below it, in the
+    half-angle bin of atan2(rho, z − b[j]) (bins from ``lo``, ``w`` wide)."""
+    k = H.shape[1]
+    for i in range(z.size):
+        for j in range(b.size):
+            dz = z[i] - b[j]
+            if dz > 0:
+                x = np.floor((np.arctan2(rho[i], dz) - lo) / w)
+                if 0 <= x < k:
+                    H[j, int(x)] += 1.0

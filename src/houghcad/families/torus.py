@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -125,6 +126,14 @@ class Torus(Family):
         voter = np.repeat(np.arange(len(Pl)), len(R))
         return voter, np.stack([np.broadcast_to(R, r.shape).ravel(), r.ravel()], axis=1)
 
+    def votes(self, Pl, Nl, grid, ctx):
+        # The sweep of gamma, voted as it goes: a point's samples fall in distinct major-radius
+        # bins, so each is a vote of its own (one per point and cell).
+        H = np.zeros(grid.bins)
+        lower, width = np.asarray(grid.lower, float), grid.width.astype(float)
+        _sweep_votes(Pl[:, 2].astype(float), np.hypot(Pl[:, 0], Pl[:, 1]), grid.centers(0), lower[1], width[1], H)
+        return H
+
     def primitive(self, values, placement):
         return Primitive("torus", {"center": placement.origin.copy(), "axis": placement.R[2].copy(),
                                    "major_radius": float(values[0]), "minor_radius": float(values[1])})
@@ -193,3 +202,16 @@ class Torus(Family):
 
     def frame(self, prim):
         return Frame("point", np.asarray(prim.params["center"], float), unit(prim.params["axis"]))
+
+
+# By hand in numba: gamma's (n, bins) samples are held whole and then voted.
+@numba.njit(cache=True)
+def _sweep_votes(z: np.ndarray, rho: np.ndarray, R: np.ndarray, lo: float, w: float, H: np.ndarray) -> None:
+    """Add to H (len(R), k) a vote per point (z, rho (n,)) and major radius R[j], in the minor
+    radius bin of hypot(rho − R[j], z) (bins from ``lo``, ``w`` wide)."""
+    k = H.shape[1]
+    for i in range(z.size):
+        for j in range(R.size):
+            x = np.floor((np.hypot(rho[i] - R[j], z[i]) - lo) / w)
+            if 0 <= x < k:
+                H[j, int(x)] += 1.0
