@@ -350,6 +350,18 @@ class FamilyTable(Mapping[str, V]):
 
 # --- small geometric helpers shared by the families ---------------------------
 
+def swept_votes(kernel, Pl: np.ndarray, grid: Grid) -> np.ndarray:
+    """The accumulator (``grid.bins``, 2-D) of a Γ_P swept over the bins of its first parameter
+    about the z axis: ``kernel(z, rho, centres, lo, w, H)`` (numba) adds each point's vote for
+    every centre of the first parameter to H, in the second parameter's bins (from ``lo``,
+    ``w`` wide). A point's samples fall in distinct bins of the first parameter, so each is a
+    vote of its own (one per point and cell)."""
+    H = np.zeros(grid.bins)
+    kernel(Pl[:, 2].astype(float), np.hypot(Pl[:, 0], Pl[:, 1]), grid.centers(0), float(grid.lower[1]),
+           float(grid.width[1]), H)
+    return H
+
+
 def unit(v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, float)
     n = np.linalg.norm(v, axis=-1, keepdims=True)

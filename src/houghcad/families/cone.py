@@ -12,7 +12,7 @@ from scipy.optimize import least_squares
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, radial,
-                   register, tangent_basis, unit, unit_derivatives)
+                   register, swept_votes, tangent_basis, unit, unit_derivatives)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
 
 
@@ -121,12 +121,7 @@ class Cone(Family):
         return voter, vals
 
     def votes(self, Pl, Nl, grid, ctx):
-        # The sweep of gamma, voted as it goes: a point's samples fall in distinct apex-height
-        # bins, so each is a vote of its own (one per point and cell).
-        H = np.zeros(grid.bins)
-        lower, width = np.asarray(grid.lower, float), grid.width.astype(float)
-        _sweep_votes(Pl[:, 2].astype(float), np.hypot(Pl[:, 0], Pl[:, 1]), grid.centers(0), lower[1], width[1], H)
-        return H
+        return swept_votes(_sweep_votes, Pl, grid)  # the sweep of gamma, voted as it goes
 
     def primitive(self, values, placement):
         b, alpha = float(values[0]), float(values[1])

@@ -344,11 +344,17 @@ class HelicalSurface(Family):
         def make(x) -> Primitive:
             return Primitive(self.name, {**p0, "R1": x[0], "R2": x[1], "k1": x[2], "k2": x[3]})
 
+        last: dict[bytes, tuple] = {}
+
         def foot(x):
-            r, Jp, Jd, (phi, *_), (psi, dl) = self._foot(make(x), P)
-            nrm = np.cross(Jp, Jd)
-            nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
-            return r, nrm, phi, psi, dl
+            # least_squares asks for the residuals and then the Jacobian at the same x: find the
+            # feet once for both.
+            key = np.asarray(x, float).tobytes()
+            if key not in last:
+                r, Jp, Jd, (phi, *_), (psi, dl) = self._foot(make(x), P)
+                last.clear()
+                last[key] = (r, unit(np.cross(Jp, Jd)), phi, psi, dl)
+            return last[key]
 
         def res(x):
             r, nrm, *_ = foot(x)

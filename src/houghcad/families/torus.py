@@ -11,8 +11,8 @@ from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, tangent_basis, unit,
-                   unit_derivatives)
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, swept_votes,
+                   tangent_basis, unit, unit_derivatives)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 
@@ -127,12 +127,7 @@ class Torus(Family):
         return voter, np.stack([np.broadcast_to(R, r.shape).ravel(), r.ravel()], axis=1)
 
     def votes(self, Pl, Nl, grid, ctx):
-        # The sweep of gamma, voted as it goes: a point's samples fall in distinct major-radius
-        # bins, so each is a vote of its own (one per point and cell).
-        H = np.zeros(grid.bins)
-        lower, width = np.asarray(grid.lower, float), grid.width.astype(float)
-        _sweep_votes(Pl[:, 2].astype(float), np.hypot(Pl[:, 0], Pl[:, 1]), grid.centers(0), lower[1], width[1], H)
-        return H
+        return swept_votes(_sweep_votes, Pl, grid)  # the sweep of gamma, voted as it goes
 
     def primitive(self, values, placement):
         return Primitive("torus", {"center": placement.origin.copy(), "axis": placement.R[2].copy(),
