@@ -289,6 +289,20 @@ def test_auto_chooses_pca_on_a_clean_cloud(make):
     assert preprocess(cloud.points).normals_method == "pca"
 
 
+def test_crease_points_are_the_voted_ones_on_a_clean_part_only():
+    cloud = synth.block_with_hole_and_slot(0, n_points=5000)
+    auto, pca = preprocess(cloud.points, seed=0), preprocess(cloud.points, method="pca", seed=0)
+    assert auto.crease is not None and auto.crease.shape == (5000,)
+    dot = np.einsum("ij,ij->i", auto.transform.inv_dirs(auto.normals), pca.transform.inv_dirs(pca.normals))
+    voted = np.abs(dot) < 1 - 1e-9
+    assert np.array_equal(voted, auto.crease & voted) and voted.sum() >= 0.9 * auto.crease.sum()
+    assert 0 < auto.crease.mean() < 0.5
+    # Noisy clouds keep PCA normals, given normals are trusted: no crease points.
+    noisy = synth.block_with_hole_and_slot(0, n_points=5000, noise=0.003)
+    assert preprocess(noisy.points).crease is None
+    assert preprocess(cloud.points, cloud.normals).crease is None
+
+
 def test_input_normals_are_used_as_given():
     cloud = synth.single("cylinder", 0, n_points=2000, noise=0.003)
     pre = preprocess(cloud.points, cloud.normals)

@@ -13,7 +13,8 @@ from houghcad.families import REGISTRY, select as select_families
 from houghcad.pipeline import Segmenter
 from houghcad.preprocess import preprocess
 from houghcad.evaluate import parameter_errors
-from houghcad.recognize import _noise_floored, recognize, select
+from houghcad.families.base import Primitive
+from houghcad.recognize import _noise_floored, evaluate, recognize, select
 from houghcad.state import Candidate, mean_fitting_error
 
 
@@ -112,6 +113,32 @@ def test_a_candidate_competes_with_every_one_it_would_displace():
     got = select(cands, np.ones(len(P), bool), ctx)
     assert [c.family.name for c in got] == ["plane", "plane"]
     assert [len(c.indices) for c in got] == [100, 100]
+
+
+def test_crease_points_with_wrong_normals_do_not_cut_a_face_in_two():
+    # On a narrow face, voted crease normals take the neighbouring faces'
+    # planes in places: such points are not the face's inliers, but they lie on
+    # it and keep its two sides one candidate.
+    cloud = synth.single("plane", 0, n_points=2000)
+    ctx = _context(cloud.points)
+    P = ctx.pre.points
+    c = P.mean(axis=0)
+    n = np.linalg.eigh(np.cov(P.T))[1][:, 0]
+    u = np.linalg.eigh(np.cov(P.T))[1][:, 2]
+    t = (P - c) @ u
+    band = np.abs(t) < 3 * ctx.link
+    N = ctx.pre.normals.copy()
+    N[band] = np.cross(n, u)  # 90 degrees off
+    prim = Primitive("plane", {"normal": n, "offset": float(n @ c)})
+    # Voted crease normals: the band links the two sides.
+    crease = replace(ctx, pre=replace(ctx.pre, normals=N, crease=band))
+    got = evaluate(REGISTRY["plane"], prim, np.arange(len(P)), crease, ctx.cell)
+    assert len(got) == 1
+    assert np.array_equal(got[0].indices, np.flatnonzero(~band))
+    # Trusted normals: the band is another surface crossing this one, and no bridge.
+    crossing = replace(ctx, pre=replace(ctx.pre, normals=N, crease=None))
+    got = evaluate(REGISTRY["plane"], prim, np.arange(len(P)), crossing, ctx.cell)
+    assert len(got) == 2
 
 
 # --------------------------------------------------------------------------- clustering

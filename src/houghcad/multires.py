@@ -183,7 +183,7 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
     if sub.parts is not None:
         seg.parts = [_pieces(seg.indices(s), parts_full) for s in range(len(sub))]
     seg.groups = list(sub.groups)
-    return FullResolution(seg=seg, pre=replace(pre, points=x, normals=nrm))
+    return FullResolution(seg=seg, pre=replace(pre, points=x, normals=nrm, crease=None))
 
 
 def _candidates(labels: np.ndarray, nb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -7,9 +7,7 @@ parameter can be mapped back to the input's coordinates.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Callable, TypeVar
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -17,10 +15,10 @@ from scipy.spatial import cKDTree
 from .errors import InputError
 from .hough import direction_accumulator, refine_direction
 
-T = TypeVar("T")
-#: Rows per chunk of the per-point fits: fixed, so that the result does not depend on how
-#: many threads share the chunks (and a chunk's (rows, k, 3) arrays stay a few MB).
-ROWS = 8192
+from .normals import ROWS, by_rows, pca_normals, quadric_residuals, voting_normals
+
+__all__ = ["ROWS", "Preprocessed", "Similarity", "by_rows", "pca_normals", "preprocess", "quadric_residuals",
+           "rotation_to_z", "voting_normals"]
 
 
 @dataclass(frozen=True)
@@ -79,132 +77,6 @@ def rotation_to_z(d: np.ndarray, x_hint: np.ndarray | None = None) -> np.ndarray
     return np.stack([x, y, d])
 
 
-def pca_normals(points: np.ndarray, neighbors: np.ndarray, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Unoriented normals by PCA of each point's neighbourhood.
-
-    Parameters
-    ----------
-    points : ndarray, shape (n, 3)
-    neighbors : ndarray of int, shape (n, k)
-        Indices of the k nearest neighbours (the point itself included).
-    workers : int
-        Threads sharing the chunks of rows (numpy releases the GIL in them).
-
-    Returns
-    -------
-    normals : ndarray, shape (n, 3), unit
-    eigvals : ndarray, shape (n, 3)
-        Covariance eigenvalues, ascending (squared length units).
-    """
-    def fit(rows: slice) -> tuple[np.ndarray, np.ndarray]:
-        nb = points[neighbors[rows]]
-        nb = nb - nb.mean(axis=1, keepdims=True)
-        w, v = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb) / neighbors.shape[1])
-        return v[:, :, 0], w
-
-    parts = by_rows(fit, len(neighbors), workers)
-    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
-
-
-def by_rows(fn: Callable[[slice], T], n: int, workers: int = 1, rows: int = ROWS) -> list[T]:
-    """``fn`` over the chunks of ``rows`` consecutive rows of ``n``, on ``workers`` threads, in
-    order. The chunks do not depend on ``workers``: neither does the result."""
-    chunks = [slice(s, min(s + rows, n)) for s in range(0, n, rows)] or [slice(0, 0)]
-    if workers <= 1 or len(chunks) < 2:
-        return [fn(c) for c in chunks]
-    with ThreadPoolExecutor(min(workers, len(chunks))) as ex:
-        return list(ex.map(fn, chunks))
-
-
-def quadric_residuals(points: np.ndarray, neighbors: np.ndarray, workers: int = 1) -> np.ndarray:
-    """RMS residual of a local quadric height-field fit, per point.
-
-    Each neighbourhood is put in its PCA frame and fitted with
-    h = a x² + b xy + c y² + d x + e y + f: curvature no longer counts as
-    residual, noise still does.
-
-    Parameters
-    ----------
-    points : ndarray, shape (n, 3)
-    neighbors : ndarray of int, shape (n, k), k >= 7
-    workers : int
-        Threads sharing the chunks of rows.
-
-    Returns
-    -------
-    ndarray, shape (n,)
-    """
-    def fit(rows: slice) -> np.ndarray:
-        nb = points[neighbors[rows]]
-        nb = nb - nb.mean(axis=1, keepdims=True)
-        _, v = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
-        u = np.einsum("nki,nij->nkj", nb, v)
-        h, a, b = u[..., 0], u[..., 2], u[..., 1]
-        A = np.stack([a * a, a * b, b * b, a, b, np.ones_like(a)], axis=2)
-        M = np.einsum("nki,nkj->nij", A, A)
-        ridge = 1e-9 * np.einsum("nii->n", M)[:, None, None] * np.eye(6)
-        c = np.linalg.solve(M + ridge, np.einsum("nki,nk->ni", A, h)[..., None])[..., 0]
-        r = h - np.einsum("nki,ni->nk", A, c)
-        return np.sqrt((r**2).mean(axis=1))
-
-    return np.concatenate(by_rows(fit, len(neighbors), workers))
-
-
-def voting_normals(points: np.ndarray, neighbors: np.ndarray, n_triples: int = 24, angle: float = 10.0,
-                   seed: int = 0, chunk: int = 8192, anchored: bool = False) -> np.ndarray:
-    """Robust unoriented normals by voting (after Raffo et al. 2022).
-
-    Every point draws ``n_triples`` random triples of its neighbours; each
-    triple's plane normal is a vote, and the normal is the mean of the votes
-    that agree (within ``angle`` degrees) with the most supported one. Near
-    sharp edges this picks one side's plane instead of averaging both.
-
-    ``anchored``: every triple is the point itself and two of its
-    neighbours. The most supported side is then a plane through the point:
-    on a face two or three spacings wide between two wide ones, the point's
-    own face, where free triples pick the wide neighbour's plane.
-
-    Parameters
-    ----------
-    points : ndarray, shape (n, 3)
-    neighbors : ndarray of int, shape (m, k)
-        Neighbours of the m points to estimate; with ``anchored``, column 0
-        is the point itself (as a KD-tree query of the points returns it).
-
-    Returns
-    -------
-    normals : ndarray, shape (m, 3), unit
-    """
-    rng = np.random.default_rng(seed)
-    n, k = neighbors.shape
-    out = np.empty((n, 3))
-    cosa = np.cos(np.radians(angle))
-    for s in range(0, n, chunk):
-        nbr = neighbors[s:s + chunk]
-        m = len(nbr)
-        # Anchored triples overwrite this draw; it stays so that the random
-        # stream, and every clean cloud's crease normals, keep their values.
-        pick = rng.integers(0, k, size=(m, n_triples, 3))
-        if anchored:
-            pick[:, :, 0] = 0
-            pick[:, :, 1:] = rng.integers(1, k, size=(m, n_triples, 2))
-        tri = points[np.take_along_axis(nbr[:, None, :], pick.reshape(m, -1)[:, None, :], axis=2)[:, 0]]
-        tri = tri.reshape(m, n_triples, 3, 3)
-        nrm = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
-        ln = np.linalg.norm(nrm, axis=2)
-        ok = ln > 1e-12 * (1 + ln.max(axis=1, keepdims=True))
-        nrm = nrm / np.where(ln > 0, ln, 1)[..., None]
-        agree = (np.abs(np.einsum("mti,msi->mts", nrm, nrm)) >= cosa) & ok[:, None, :] & ok[:, :, None]
-        best = np.argmax(agree.sum(axis=2), axis=1)
-        bvec = nrm[np.arange(m), best]
-        sgn = np.sign(np.einsum("mti,mi->mt", nrm, bvec))
-        sel = agree[np.arange(m), best] * sgn
-        v = np.einsum("mt,mti->mi", sel, nrm)
-        lv = np.linalg.norm(v, axis=1)
-        out[s:s + m] = v / np.where(lv > 0, lv, 1)[:, None]
-    return out
-
-
 #: Quadric residual (spacings) above which a clean cloud's point is on a
 #: crease and takes voted normals (``preprocess``, method ``auto``).
 CREASE = 0.1
@@ -237,6 +109,9 @@ class Preprocessed:
     reach : float
         Median distance to the 6th nearest neighbour (standard units): the
         scale at which the sampling is connected.
+    crease : ndarray of bool, shape (n,), or None
+        Points of a clean cloud on a crease (no local quadric fits them), whose normals were
+        voted: there the normal may be a neighbouring face's. None when no point was voted.
     """
 
     points: np.ndarray
@@ -248,6 +123,7 @@ class Preprocessed:
     diagonal: float
     normals_method: str
     reach: float = 0.0
+    crease: np.ndarray | None = None
 
 
 #: The 16-neighbour noise estimate (spacings) above which ``noise="auto"``
@@ -287,7 +163,7 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     points = np.asarray(points, dtype=np.float64)
     center, scale0, x = _unit_cube(points)
     hood = _neighbourhoods(x, k, workers)
-    nrm, dist, noise, used = _choose_normals(x, hood, normals, method, seed, noise_policy, workers)
+    nrm, dist, noise, used, crease = _choose_normals(x, hood, normals, method, seed, noise_policy, workers)
     # From the neighbourhoods the normals came from (the widened ones on noisy clouds).
     spacing = float(np.median(dist[:, 1]))
     # Connectivity scale: the 6th neighbour's distance is about 1.5 spacings
@@ -299,7 +175,7 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     T = Similarity(center=center, R=R, scale=scale0 * s2)
     diag = float(np.linalg.norm(np.ptp(x, axis=0)))
     return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
-                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2)
+                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2, crease=crease)
 
 
 def _unit_cube(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
@@ -412,7 +288,8 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
 
 
 def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | None, method: str, seed: int,
-                    noise_policy: str, workers: int = 1) -> tuple[np.ndarray, np.ndarray, float, str]:
+                    noise_policy: str, workers: int = 1) \
+        -> tuple[np.ndarray, np.ndarray, float, str, np.ndarray | None]:
     """The normals :func:`preprocess` keeps (see its ``method`` and ``noise``).
 
     Parameters
@@ -433,11 +310,13 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
         Noise estimate, re-estimated on widened neighbourhoods.
     method : str
         ``"input"``, ``"pca"``, ``"pca-k64"`` (``"pca-k<n>"``) or ``"voting"``.
+    crease : ndarray of bool, shape (n,), or None
+        The crease points whose normals were voted (``auto`` on clean clouds).
     """
     if normals is not None and method in ("auto", "input"):
         nrm = np.asarray(normals, float)
         nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
-        return nrm, hood.dist, hood.noise, "input"
+        return nrm, hood.dist, hood.noise, "input", None
     if method == "input":
         raise InputError("normals method 'input' needs normals in the input")
     if method not in ("auto", "pca", "voting"):
@@ -467,10 +346,12 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
         # face two or three spacings wide (a groove wall, a chamfer) its
         # neighbourhoods are mostly the neighbours' points. No local
         # quadric explains a crease, while curvature alone it does.
-        crease = np.flatnonzero(hood.qres > CREASE * hood.spacing)
+        on_crease = hood.qres > CREASE * hood.spacing
+        crease = np.flatnonzero(on_crease)
         if len(crease):
             nrm[crease] = voting_normals(x, nbr[crease], seed=seed, anchored=True)
-    return nrm, dist, noise, used
+            return nrm, dist, noise, used, on_crease
+    return nrm, dist, noise, used, None
 
 
 def _standard_frame(x: np.ndarray, nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

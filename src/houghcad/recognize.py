@@ -107,7 +107,8 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
     """Candidate evaluation on the point set ``idx`` (global indices).
 
     Inliers within ``coarse`` → least-squares refit → inliers within tau →
-    dense subsets → one Candidate per subset with its MFE.
+    dense subsets of the inliers and the crease points within tau → one
+    Candidate per subset (its inliers) with its MFE.
     """
     P, N = ctx.pre.points[idx], ctx.pre.normals[idx]
     rng = np.random.default_rng(ctx.seed)
@@ -124,10 +125,18 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
             return []
         prim = new
     prim, ok, d = _trimmed_refits(fam, prim, P, N, ctx, rng)
-    sel = np.flatnonzero(ok)
+    # Connected also through crease points on the surface, kept by the normal test: on a face
+    # two or three spacings wide (a chamfer, a land) most points are on a crease, where the
+    # normal may be a neighbouring face's, and dropping them cuts the face into pieces. Other
+    # points with a wrong normal belong to a surface that crosses this one: no bridge.
+    bridge = ok if ctx.pre.crease is None else ok | ctx.pre.crease[idx]
+    near = np.flatnonzero(bridge & (d < ctx.tau))
     out = []
-    for comp in dense_subsets(P[sel], ctx.link, ctx.min_points, t.dense_min_samples):
-        loc = sel[comp]
+    for comp in dense_subsets(P[near], ctx.link, ctx.min_points, t.dense_min_samples):
+        loc = near[comp]
+        loc = loc[ok[loc]]
+        if len(loc) < ctx.min_points:
+            continue
         X = P[loc]
         if not _patch(fam, prim, X, ctx):
             continue
