@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 import houghcad
 from houghcad import synth
@@ -174,6 +175,35 @@ def test_faces_across_a_gap_that_touch_at_a_few_points_stay_two_parts():
     merged = next(it for it in a.items_ if it.family.name == "plane")
     assert sorted(merged.members) == [0, 1] and len(merged.parts) == 2
     assert _kinds(a, "same_primitive") == [[a.items_.index(merged)]]
+
+
+def _strip_in_two(wall: bool):
+    """A plane strip 2.5 spacings wide cut by a gap of three links along it, and a wide wall
+    that meets it along its edge (as a chamfer's neighbour does) or stands apart."""
+    rng = np.random.default_rng(5)
+    W = np.column_stack([rng.uniform(-2, 2, 6000), np.zeros(6000), rng.uniform(-1.5, 0, 6000)])
+    spacing = float(np.median(cKDTree(W).query(W, k=2)[0][:, 1]))
+    reach = float(np.median(cKDTree(W).query(W, k=7)[0][:, 6]))
+    link, w = max(2 * spacing, 1.5 * reach), 2.5 * spacing
+    S = np.column_stack([rng.uniform(-2, 2, 400), rng.uniform(0, w, 400), np.zeros(400)])
+    S = S[np.abs(S[:, 0]) > 1.5 * link]
+    plane = _world_prim("plane", normal=Z, point=[0, 0, 0])
+    cyl = (_cyl([0, 3, -1], Z, 0.5, 1.0, 800), _world_prim("cylinder", axis_point=[0, 3, 0], axis=Z, radius=0.5))
+    shift = 0.0 if wall else -0.5
+    W[:, 1] += shift
+    return [(S[S[:, 0] < 0], plane), (S[S[:, 0] > 0], plane), cyl,
+            (W, _world_prim("plane", normal=Y, point=[0, shift, 0]))]
+
+
+@pytest.mark.parametrize("wall", [True, False])
+def test_a_narrow_face_is_one_part_across_a_gap_in_its_sampling(wall):
+    # Along a face a few spacings wide, a random sample leaves gaps longer than
+    # the link; the neighbouring wall's edge runs on beside the gap, so the
+    # cloud does not leave the surface there. With the wall apart the gap is
+    # empty space between two faces of one plane: two parts.
+    a = _associate(_strip_in_two(wall))
+    merged = next(it for it in a.items_ if sorted(it.members) == [0, 1])
+    assert len(merged.parts) == (1 if wall else 2)
 
 
 def test_parallel_planes_closer_than_the_noise_floor_are_not_merged_when_distinct():

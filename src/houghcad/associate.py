@@ -36,6 +36,7 @@ import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from .families.base import Family, Frame, Primitive, regular_indices, unit
 from .adjacency import SegmentGraph
@@ -82,6 +83,17 @@ class RawGroup:
     kind: str
     members: list[int]
     descriptors: dict = field(default_factory=dict)
+
+
+def _row_axis(P: np.ndarray, width: float) -> np.ndarray | None:
+    """Main axis (3,) of the points P (n, 3) when they are a row narrower than ``width`` across
+    (their central 95 % in the second principal direction), else None."""
+    if len(P) < 3:
+        return None
+    Q = P - P.mean(axis=0)
+    _, _, vt = np.linalg.svd(Q[:: max(1, len(Q) // EXTENT_POINTS)], full_matrices=False)
+    lo, hi = np.percentile(Q @ vt[1], EXTENT_PERCENTILES)
+    return vt[0] if hi - lo <= width else None
 
 
 def extent(P: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
@@ -222,14 +234,14 @@ class Associator:
         items: list[Item] = []
         same: list[tuple[list[int], int]] = []  # per merged surface: raw members, number of parts
         for members in surfaces:
-            parts_of = self._parts(members, adjacency)
             if len(members) == 1:
                 c = cands[members[0]]
                 items.append(Item(c.family, c.prim, np.sort(c.indices), [np.sort(c.indices)], members, c.fixed))
                 continue
-            same.append((members, len(parts_of)))
             idx = np.sort(np.concatenate([cands[m].indices for m in members]))
             prim = self._refit(cands[members[0]].family, cands[members[0]].prim, idx)
+            parts_of = self._parts(members, adjacency | self._bridged(members, cands, prim, link))
+            same.append((members, len(parts_of)))
             parts = [np.sort(np.concatenate([cands[m].indices for m in p])) for p in parts_of]
             items.append(Item(cands[members[0]].family, prim, idx, parts, members))
 
@@ -285,6 +297,43 @@ class Associator:
         u, v = g.edges[:, 0], g.edges[:, 1]
         ok = least >= self.tol.contact * np.sqrt(np.minimum(sizes[u], sizes[v]))
         return {(int(a), int(b)) for a, b in g.edges[ok].tolist()}
+
+    def _bridged(self, members: list[int], cands: list[SegmentView], prim: Primitive,
+                 link: float) -> set[tuple[int, int]]:
+        """Pairs (i < j) of members of one surface ``prim``: pieces of a narrow face apart across
+        a gap in its sampling.
+
+        A random sample of a face narrower than ``link`` is a row of points, whose gaps are far
+        longer than a wide face's: the splitting phase's pieces of it stay apart. Two such
+        pieces are one part when the gap continues both of them (the segment joining their
+        nearest points runs along each), and the cloud goes on along the gap: every point of
+        that segment lies within ``bridge_links`` × ``link`` of the surface and within
+        ``link`` of some point of the cloud (the neighbouring faces' edges run on beside it).
+        Pieces closer than ``link`` are left to the contact rule (:meth:`_adjacency`); pieces
+        of a wide face, or apart across empty space, stay apart.
+        """
+        P, fam, t = self._pre.points, cands[members[0]].family, self.tol
+        axes = {m: _row_axis(P[cands[m].indices], link) for m in members}
+        out: set[tuple[int, int]] = set()
+        for i, a in enumerate(members):
+            for b in members[i + 1:]:
+                if axes[a] is None or axes[b] is None:
+                    continue
+                A, B = cands[a].indices, cands[b].indices
+                d, j = cKDTree(P[B]).query(P[A])
+                k = int(np.argmin(d))
+                if d[k] <= link:  # in contact: a line or a corner, as the contact rule says
+                    continue
+                p, q = P[A[k]], P[B[j[k]]]
+                u = (q - p) / d[k]
+                if min(abs(u @ axes[a]), abs(u @ axes[b])) < np.cos(np.radians(t.bridge_angle)):
+                    continue
+                S = p + np.linspace(0.0, 1.0, int(np.ceil(2 * d[k] / link)) + 1)[1:-1, None] * (q - p)
+                if np.any(fam.distance(prim, S) > t.bridge_links * link) or \
+                        not np.all(np.isfinite(self._pre.tree.query(S, distance_upper_bound=link)[0])):
+                    continue
+                out.add((min(a, b), max(a, b)))
+        return out
 
     def _parts(self, members: list[int], adjacency: set[tuple[int, int]]) -> list[list[int]]:
         """Connected components of members under adjacency (lists of members)."""

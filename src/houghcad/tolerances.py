@@ -228,6 +228,10 @@ class AssociationTolerances:
     extent_floor: float = tol(0.02, "diagonals", "the least extent tolerance")
     contact: float = tol(0.3, "√(points of the smaller)", "pieces of one surface are one part when each side has "
                          "this many points touching the other: a shared boundary, not a corner")
+    bridge_links: float = tol(0.5, "links", "a gap joining two pieces of a narrow face lies this close to their "
+                              "surface")
+    bridge_angle: float = tol(25.0, "degrees", "a gap in a narrow face's sampling continues its row of points: "
+                              "the pieces' axes are within this of the gap's direction")
     propose_lengths: float = tol(4.0, "length tolerances", "same-surface proposals are generous; the union refit "
                                  "decides")
     propose_angles: float = tol(3.0, "angle tolerances", "same-surface proposals are generous")
