@@ -81,6 +81,33 @@ def test_torus_at_low_noise_is_one_torus(seed):
     assert len(best.indices) >= 0.9 * len(cloud.points)
 
 
+def test_a_band_on_the_inside_of_a_torus_tube_is_the_torus():
+    # Nearer the axis than the tube's centre circle, the points' radial
+    # distances all fall short of the major radius: the accumulator must reach
+    # past them, to where their normal lines meet.
+    from houghcad.families.torus import sample_torus
+
+    rng = np.random.default_rng(2)
+    P, N = sample_torus(rng, 1500, 5.0, 2.0, u_range=(0.0, 2.5), v_range=(2.6, 3.0))
+    ctx = replace(_context(P), local=True)
+    idx = np.arange(len(P))
+    got = recognize(idx, [REGISTRY["torus"]], ctx, np.ones(len(P), bool))
+    assert len(got) == 1 and len(got[0].indices) >= 0.95 * len(P)
+    s = ctx.pre.transform.scale
+    assert got[0].prim.params["major_radius"] / s == pytest.approx(5.0, rel=0.01)
+    assert got[0].prim.params["minor_radius"] / s == pytest.approx(2.0, rel=0.01)
+
+
+def test_normal_lines_of_a_tube_meet_at_its_centre_and_parallel_ones_nowhere():
+    from houghcad.families.torus import meridian_centre
+
+    v = np.linspace(2.6, 3.0, 50)
+    rho, h = 5.0 + 2.0 * np.cos(v), 0.3 + 2.0 * np.sin(v)
+    assert meridian_centre(rho, h, np.cos(v), np.sin(v), 0.01) == pytest.approx((5.0, 0.3))
+    # A cylinder's normal lines are parallel in the meridian plane.
+    assert meridian_centre(rho, h, np.ones(50), np.zeros(50), 0.01) is None
+
+
 def test_wide_noisy_cone_is_not_read_as_a_sphere():
     # Seed 3 is a short cone of half-angle 59°: a sphere fits its band only a
     # few standard errors above the noise, a difference that a fixed floor of

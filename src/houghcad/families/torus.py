@@ -21,18 +21,35 @@ def torus_frame(P, N):
     where, in the meridian plane, the normal lines meet at (R, h0)."""
     q, a, _, _ = axis_from_normal_lines(P, N)
     h, rho, rad = radial(P, q, a)
-    n_rho = np.einsum("ij,ij->i", N, rad)
-    n_h = N @ a
-    # 2-D least-squares intersection of the lines (rho, h) + t (n_rho, n_h).
+    centre = meridian_centre(rho, h, np.einsum("ij,ij->i", N, rad), N @ a)
+    if centre is None:
+        return q, a, 0.0
+    return q + centre[1] * a, a, centre[0]
+
+
+def meridian_centre(rho, h, n_rho, n_h, spread: float = 0.0):
+    """Where the normal lines (rho, h) + t (n_rho, n_h) of the meridian plane meet, least
+    squares: the tube's centre (R, h0), or None when their directions spread less than
+    ``spread`` (the smallest eigenvalue of the lines' projector sum against the largest;
+    parallel lines meet nowhere)."""
     D = np.stack([n_rho, n_h], axis=1)
     D = D / np.maximum(np.linalg.norm(D, axis=1, keepdims=True), 1e-12)
     A = np.eye(2)[None] - D[:, :, None] * D[:, None, :]
     M = A.sum(axis=0)
     b = np.einsum("nij,nj->i", A, np.stack([rho, h], axis=1))
-    if np.linalg.cond(M) > 1e8:
-        return q, a, 0.0
+    ev = np.linalg.eigvalsh(M)
+    if np.linalg.cond(M) > 1e8 or ev[0] < spread * ev[1]:
+        return None
     R0, h0 = np.linalg.solve(M, b)
-    return q + h0 * a, a, float(R0)
+    return float(R0), float(h0)
+
+
+#: Spread of the normals' directions in the meridian plane (eigenvalue ratio, about the
+#: squared standard deviation of their angles in radians) from which their meeting point is
+#: trusted to place the tube's centre: a band 10 degrees wide around the tube.
+MERIDIAN_SPREAD = 0.01
+#: Most bins per axis of the torus accumulator.
+MAX_BINS = 200
 
 
 # --- synthetic sampler (houghcad.synth) ----------------------------------------
@@ -115,7 +132,15 @@ class Torus(Family):
     def region(self, Pl, Nl, ctx):
         rho = np.hypot(Pl[:, 0], Pl[:, 1])
         hi = min(float(rho.max()) + ctx.tau, ctx.max_radius)
-        nb = int(np.clip(hi / max(ctx.cell, 1e-6), 16, 200))
+        nb = int(np.clip(hi / max(ctx.cell, 1e-6), 16, MAX_BINS))
+        # Points on the inside of the tube lie nearer the axis than its centre circle: where
+        # their normal lines meet past them, the major radius reaches there, in bins as wide.
+        rad = Pl[:, :2] / np.maximum(rho, 1e-12)[:, None]
+        centre = meridian_centre(rho, Pl[:, 2], np.einsum("ij,ij->i", Nl[:, :2], rad), Nl[:, 2], MERIDIAN_SPREAD)
+        if centre is not None and centre[0] + ctx.tau > hi:
+            w = hi / nb
+            hi = min(centre[0] + float(np.ptp(rho)) + ctx.tau, ctx.max_radius)
+            nb = int(np.clip(np.ceil(hi / w), 16, 2 * MAX_BINS))
         return Grid((0.0, 0.0), (hi, hi), (nb, nb))
 
     def gamma(self, Pl, Nl, grid, ctx):
