@@ -69,6 +69,13 @@ class NoisePolicy:
         sides of each edge), then poor fits are revisited, fillets sought and
         flat curved segments made planes; on clean clouds the boundary rows,
         which lie on both faces, go to the smaller face.
+    torus_grid_from_points : bool
+        The torus accumulator's major radii stop at the points' own distances
+        from the axis. On exact samples they reach on to where the points'
+        normal lines meet when that is further (a band on the inside of the
+        tube); noisy normals place that meeting point at random, and a grid
+        stretched to it coarsens every torus vote (ablation: a noisy shaft
+        with a groove lost 0.07 DSC on one seed).
     """
 
     name: str
@@ -84,14 +91,15 @@ class NoisePolicy:
     group_planes: bool
     revote_creases: bool
     nearest_edges: bool
+    torus_grid_from_points: bool
 
     @property
     def noisy(self) -> bool:
         return self.name == "noisy"
 
 
-CLEAN = NoisePolicy("clean", *([False] * 12))
-NOISY = NoisePolicy("noisy", *([True] * 12))
+CLEAN = NoisePolicy("clean", *([False] * 13))
+NOISY = NoisePolicy("noisy", *([True] * 13))
 
 
 def choose(noise: str, sigma: float, spacing: float) -> NoisePolicy:

@@ -134,7 +134,10 @@ class Torus(Family):
         hi = min(float(rho.max()) + ctx.tau, ctx.max_radius)
         nb = int(np.clip(hi / max(ctx.cell, 1e-6), 16, MAX_BINS))
         # Points on the inside of the tube lie nearer the axis than its centre circle: where
-        # their normal lines meet past them, the major radius reaches there, in bins as wide.
+        # their normal lines meet past them, the major radius reaches there, in bins as wide
+        # (exact samples: noisy normals meet at random, see houghcad.noise).
+        if ctx.policy.torus_grid_from_points:
+            return Grid((0.0, 0.0), (hi, hi), (nb, nb))
         rad = Pl[:, :2] / np.maximum(rho, 1e-12)[:, None]
         centre = meridian_centre(rho, Pl[:, 2], np.einsum("ij,ij->i", Nl[:, :2], rad), Nl[:, 2], MERIDIAN_SPREAD)
         if centre is not None and centre[0] + ctx.tau > hi:
