@@ -27,9 +27,10 @@ def torus_frame(P, N):
     return q + centre[1] * a, a, centre[0]
 
 
-def meridian_centre(rho, h, n_rho, n_h, spread: float = 0.0):
-    """Where the normal lines (rho, h) + t (n_rho, n_h) of the meridian plane meet, least
-    squares: the tube's centre (R, h0), or None when their directions spread less than
+def meridian_centre(rho: np.ndarray, h: np.ndarray, n_rho: np.ndarray, n_h: np.ndarray,
+                    spread: float = 0.0) -> tuple[float, float] | None:
+    """Where the normal lines (rho, h) + t (n_rho, n_h) of the meridian plane meet (all (n,)),
+    least squares: the tube's centre (R, h0), or None when their directions spread less than
     ``spread`` (the smallest eigenvalue of the lines' projector sum against the largest;
     parallel lines meet nowhere)."""
     D = np.stack([n_rho, n_h], axis=1)
