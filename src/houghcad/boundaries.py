@@ -44,7 +44,11 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     CAD samples include the faces' boundary curves, which lie on both faces;
     whoever was accepted first took them. To a narrow face (a fillet, a
     chamfer, a hole) those rows are a large share of its points, to a wide
-    one a negligible share. ``delta``: distance to a surface that counts as
+    one a negligible share. A point moves only if it lies on the smaller
+    surface as closely as on its own, within τ: a small surface that crosses
+    a face at a shallow angle (a cylinder fitted across three narrow strips)
+    passes within ``delta`` of a wide band of the face's points, which lie
+    exactly on their own. ``delta``: distance to a surface that counts as
     on it (standard units).
     """
     if len(seg) < 2:
@@ -65,14 +69,24 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     pi = np.broadcast_to(pts[:, None], other.shape)[mask]
     sj = other[mask]
     pairs = np.unique(np.stack([sj, pi], axis=1), axis=0)
+    own = _own_distance(seg, owner, P)
     for j in np.unique(pairs[:, 0]):
         cand = pairs[pairs[:, 0] == j, 1]
         s = seg[j]
-        cand = cand[s.family.distance(s.prim, P[cand]) < delta]
+        d = s.family.distance(s.prim, P[cand])
+        cand = cand[(d < delta) & (d <= own[cand] + ctx.tau)]
         cand = cand[sizes[j] < best_size[cand]]
         best[cand] = j
         best_size[cand] = sizes[j]
     _reassign(seg, owner, best, ctx.min_points)
+
+
+def _own_distance(seg: Segmentation, owner: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Distance (n,) of each point to its own segment's surface (inf when unsegmented)."""
+    own = np.full(len(P), np.inf)
+    for k, s in enumerate(seg):
+        own[s.indices] = s.family.distance(s.prim, P[s.indices])
+    return own
 
 
 def settle_noisy_edges(seg: Segmentation, ctx: Context, reach: float) -> None:
