@@ -314,19 +314,20 @@ class Associator:
         """
         P, fam, t = self._pre.points, cands[members[0]].family, self.tol
         axes = {m: _row_axis(P[cands[m].indices], link) for m in members}
+        rows = [m for m in members if axes[m] is not None]
+        trees = {m: cKDTree(P[cands[m].indices]) for m in rows[1:]}
+        cos_max = np.cos(np.radians(t.bridge_angle))
         out: set[tuple[int, int]] = set()
-        for i, a in enumerate(members):
-            for b in members[i + 1:]:
-                if axes[a] is None or axes[b] is None:
-                    continue
+        for i, a in enumerate(rows):
+            for b in rows[i + 1:]:
                 A, B = cands[a].indices, cands[b].indices
-                d, j = cKDTree(P[B]).query(P[A])
+                d, j = trees[b].query(P[A])
                 k = int(np.argmin(d))
                 if d[k] <= link:  # in contact: a line or a corner, as the contact rule says
                     continue
                 p, q = P[A[k]], P[B[j[k]]]
                 u = (q - p) / d[k]
-                if min(abs(u @ axes[a]), abs(u @ axes[b])) < np.cos(np.radians(t.bridge_angle)):
+                if min(abs(u @ axes[a]), abs(u @ axes[b])) < cos_max:
                     continue
                 S = p + np.linspace(0.0, 1.0, int(np.ceil(2 * d[k] / link)) + 1)[1:-1, None] * (q - p)
                 if np.any(fam.distance(prim, S) > t.bridge_links * link) or \

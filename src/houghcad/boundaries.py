@@ -69,7 +69,9 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     pi = np.broadcast_to(pts[:, None], other.shape)[mask]
     sj = other[mask]
     pairs = np.unique(np.stack([sj, pi], axis=1), axis=0)
-    own = _own_distance(seg, owner, P)
+    own = np.full(len(P), np.inf)
+    moving = np.unique(pairs[:, 1])
+    own[moving] = _own_distance(seg, owner, moving, P)
     for j in np.unique(pairs[:, 0]):
         cand = pairs[pairs[:, 0] == j, 1]
         s = seg[j]
@@ -81,11 +83,15 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     _reassign(seg, owner, best, ctx.min_points)
 
 
-def _own_distance(seg: Segmentation, owner: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """Distance (n,) of each point to its own segment's surface (inf when unsegmented)."""
-    own = np.full(len(P), np.inf)
-    for k, s in enumerate(seg):
-        own[s.indices] = s.family.distance(s.prim, P[s.indices])
+def _own_distance(seg: Segmentation, owner: np.ndarray, idx: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Distance (m,) of the points ``idx`` (m,) to their own segment's surface (inf when
+    unsegmented); ``owner`` (n,) holds every point's segment."""
+    own = np.full(len(idx), np.inf)
+    o = owner[idx]
+    for k in np.unique(o[o >= 0]):
+        at = o == k
+        s = seg[int(k)]
+        own[at] = s.family.distance(s.prim, P[idx[at]])
     return own
 
 
