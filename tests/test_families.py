@@ -283,3 +283,23 @@ def test_signed_distance_is_positive_along_the_surface_normals():
         got = REGISTRY[prim.family].signed_distance(prim, P)
         clear = np.abs(exact) > 1e-6
         np.testing.assert_allclose(got[clear], exact[clear], atol=1e-9, err_msg=prim.family)
+
+
+def test_cone_sweep_votes_match_the_arctangent_definition():
+    """The cone's vote walks tangent edges instead of taking an arctangent per sample: the same
+    accumulator as binning atan2(rho, z - b) for every apex height b below the point."""
+    from houghcad.families.cone import _sweep_votes
+
+    rng = np.random.default_rng(3)
+    z, rho = rng.normal(size=4000), np.abs(rng.normal(size=4000))
+    rho[:50] = 0.0
+    b = np.linspace(-3.0, 1.0, 40)
+    lo, w, k = np.radians(1.0), np.radians(88.0) / 176, 176
+    H = np.zeros((len(b), k))
+    _sweep_votes(z, rho, b, lo, w, H)
+    dz = z[:, None] - b[None, :]
+    x = np.floor((np.arctan2(rho[:, None], dz) - lo) / w)
+    ok = (dz > 0) & (x >= 0) & (x < k)
+    ref = np.zeros_like(H)
+    np.add.at(ref, (np.broadcast_to(np.arange(len(b)), dz.shape)[ok], x[ok].astype(int)), 1.0)
+    np.testing.assert_array_equal(H, ref)

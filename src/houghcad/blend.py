@@ -126,15 +126,8 @@ def _fillet_pass(seg: Segmentation, families: list[Family], ctx: Context) -> int
     if len(seg) < 2 or not ({"cylinder", "torus"} & set(by_name)):
         return 0
     pairs, nbrs = _corner_pairs(seg, ctx)
-    P = ctx.pre.points
-    trees: dict[int, cKDTree] = {}
-
-    def tree(k: int) -> cKDTree:
-        if k not in trees:
-            trees[k] = cKDTree(P[seg[k].indices])
-        return trees[k]
-
-    found = [p for i, j in pairs if (p := _propose(seg, i, j, nbrs, by_name, tree, ctx)) is not None]
+    near = _Near(seg, ctx.pre.points, ctx.tol.fillets.reach_diagonals * ctx.pre.diagonal)
+    found = [p for i, j in pairs if (p := _propose(seg, i, j, nbrs, by_name, near, ctx)) is not None]
     return _apply(seg, found, ctx)
 
 
@@ -156,7 +149,7 @@ def _corner_pairs(seg: Segmentation, ctx: Context) -> tuple[list[tuple[int, int]
 
 
 def _propose(seg: Segmentation, i: int, j: int, nbrs: dict[int, set[int]], by_name: dict[str, Family],
-             tree, ctx: Context) -> _Proposal | None:
+             near: "_Near", ctx: Context) -> _Proposal | None:
     """The fillet between segments i and j, or None (see the module docstring)."""
     t = ctx.tol.fillets
     P = ctx.pre.points
@@ -171,9 +164,7 @@ def _propose(seg: Segmentation, i: int, j: int, nbrs: dict[int, set[int]], by_na
         return None
     # Only the points of each segment near the other: the corner may run
     # along part of a long edge only.
-    reach = t.reach_diagonals * ctx.pre.diagonal
-    near_a = A.indices[np.isfinite(tree(j).query(P[A.indices], distance_upper_bound=reach)[0])]
-    near_b = B.indices[np.isfinite(tree(i).query(P[B.indices], distance_upper_bound=reach)[0])]
+    near_a, near_b = near.within(A.indices, j), near.within(B.indices, i)
     if len(near_a) < ctx.min_points or len(near_b) < ctx.min_points:
         return None
     # Segments touching both may be pieces of the fillet itself.
@@ -206,6 +197,44 @@ def _propose(seg: Segmentation, i: int, j: int, nbrs: dict[int, set[int]], by_na
     arc = Arc(sec, fit.corner, fit.rays, lines[:, :2].copy(), float(fit.radius))
     return _Proposal(fit.lr, i, j, fit.taken.tolist(), fam, prim, idx, pool[off], dA <= dB,
                      np.minimum(dA, dB) <= ctx.tau, arc)
+
+
+class _Near:
+    """Which points lie within ``reach`` of a segment's points, exactly, for the segments of one
+    fillet pass (``reach`` is a quarter of the diagonal: most of a big face is that near its
+    neighbours, and a nearest-neighbour search per point costs more than the fillet fits).
+
+    A segment is also kept as one point per voxel of edge ``reach / COARSE``, within ``h√3`` of
+    each of its points. A point within ``reach`` of that sample is within reach of the segment,
+    one farther than ``reach + h√3`` from it is not; only those in between search all its points.
+    """
+
+    COARSE = 8
+
+    def __init__(self, seg: Segmentation, P: np.ndarray, reach: float):
+        self.seg, self.P, self.reach = seg, P, reach
+        self.h = reach / self.COARSE
+        self._trees: dict[int, tuple[cKDTree, cKDTree]] = {}
+
+    def _of(self, k: int) -> tuple[cKDTree, cKDTree]:
+        if k not in self._trees:
+            Q = self.P[self.seg[k].indices]
+            cells = np.floor((Q - Q.min(axis=0)) / self.h).astype(np.int64)
+            key = (cells[:, 0] * (cells[:, 1].max() + 1) + cells[:, 1]) * (cells[:, 2].max() + 1) + cells[:, 2]
+            _, first = np.unique(key, return_index=True)
+            self._trees[k] = (cKDTree(Q), cKDTree(Q[first]))
+        return self._trees[k]
+
+    def within(self, idx: np.ndarray, k: int) -> np.ndarray:
+        """The points ``idx`` (global indices) within ``reach`` of segment ``k``'s points."""
+        full, coarse = self._of(k)
+        X = self.P[idx]
+        d = coarse.query(X, distance_upper_bound=2 * self.reach, workers=-1)[0]
+        ok = d <= self.reach
+        unsure = np.flatnonzero(~ok & (d <= self.reach + np.sqrt(3) * self.h))
+        if len(unsure):
+            ok[unsure] = np.isfinite(full.query(X[unsure], distance_upper_bound=self.reach, workers=-1)[0])
+        return idx[ok]
 
 
 def _fillet_primitive(sec: Section, fit: FilletFit) -> Primitive:

@@ -394,11 +394,22 @@ def unit_derivatives(b: np.ndarray, dirs: tuple[np.ndarray, ...]) -> np.ndarray:
 
 def radial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Axial coordinate h (n,), radial distance rho (n,) and radial unit vectors (n, 3)."""
+    h, rho, v = _axial(P, point, axis)
+    return h, rho, v / np.where(rho > 1e-15, rho, 1.0)[:, None]
+
+
+def axial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Axial coordinate h (n,) and radial distance rho (n,) of the points P (n, 3) about the
+    axis through ``point``: :func:`radial` without the unit vectors, which distances do not
+    need (they are run on every candidate's points)."""
+    return _axial(P, point, axis)[:2]
+
+
+def _axial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     d = P - point
     h = d @ axis
     v = d - h[:, None] * axis
-    rho = np.linalg.norm(v, axis=1)
-    return h, rho, v / np.where(rho > 1e-15, rho, 1.0)[:, None]
+    return h, np.linalg.norm(v, axis=1), v
 
 
 def lines_intersection(P: np.ndarray, D: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, float]:

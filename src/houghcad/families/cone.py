@@ -11,7 +11,7 @@ from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, radial,
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, axial, radial,
                    register, swept_votes, tangent_basis, unit, unit_derivatives)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
 
@@ -156,7 +156,7 @@ class Cone(Family):
 
         def res(x):
             p, a, al = unpack(x)
-            h, rho, _ = radial(P, p, a)
+            h, rho = axial(P, p, a)
             return rho * np.cos(al) - h * np.sin(al)
 
         def jac(x):
@@ -203,12 +203,23 @@ class Cone(Family):
 @numba.njit(cache=True)
 def _sweep_votes(z: np.ndarray, rho: np.ndarray, b: np.ndarray, lo: float, w: float, H: np.ndarray) -> None:
     """Add to H (len(b), k) a vote per point (z, rho (n,)) and apex height b[j] below it, in the
-    half-angle bin of atan2(rho, z − b[j]) (bins from ``lo``, ``w`` wide)."""
+    half-angle bin of atan2(rho, z − b[j]) (bins from ``lo``, ``w`` wide; ``b`` ascending).
+
+    No arctangent per sample: the angle is in bin x or above when rho ≥ (z − b) tan(lo + x w),
+    and it grows as the apex rises towards the point, so each point walks the bin edges once."""
     k = H.shape[1]
+    T = np.empty(k + 1)
+    for x in range(k + 1):
+        t = lo + x * w
+        T[x] = -np.inf if t <= -np.pi / 2 else (np.inf if t >= np.pi / 2 else np.tan(t))
     for i in range(z.size):
+        x = -1  # the bin of the angle: -1 below lo, k at or above the last edge
+        r = rho[i]
         for j in range(b.size):
             dz = z[i] - b[j]
-            if dz > 0:
-                x = np.floor((np.arctan2(rho[i], dz) - lo) / w)
-                if 0 <= x < k:
-                    H[j, int(x)] += 1.0
+            if dz <= 0:
+                break
+            while x < k and r >= dz * T[x + 1]:
+                x += 1
+            if 0 <= x < k:
+                H[j, x] += 1.0

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..hough import Grid, direction_accumulator, normal_line_peaks, refine_direction
 from ..preprocess import rotation_to_z
-from .base import Frame, Family, Placement, Primitive, gauss_newton, radial, register, tangent_basis, unit
+from .base import Frame, Family, Placement, Primitive, gauss_newton, axial, radial, register, tangent_basis, unit
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 
@@ -134,7 +134,7 @@ class Cylinder(Family):
                                       "radius": float(values[0])})
 
     def distance(self, prim, P):
-        _, rho, _ = radial(P, prim.params["axis_point"], prim.params["axis"])
+        _, rho = axial(P, prim.params["axis_point"], prim.params["axis"])
         return np.abs(rho - prim.params["radius"])
 
     def surface_normals(self, prim, P):

@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, frame_turn_rows, radial,
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, frame_turn_rows, axial,
                    register, regular_indices, tangent_basis, unit)
 from ._sampling import ORIGIN, TAU, Array, Sampler, span
 
@@ -258,7 +258,7 @@ class Ellipsoid(Family):
         # Of revolution: axis from the normal lines, centre from the conic
         # A ρ² + C h² + E h + F = 0 in the meridian plane.
         q, a, _, _ = axis_from_normal_lines(P, N)
-        h, rho, _ = radial(P, q, a)
+        h, rho = axial(P, q, a)
         M = np.stack([rho * rho, h * h, h, np.ones_like(h)], axis=1)
         A_, C_, E_, _ = np.linalg.svd(M, full_matrices=False)[2][-1]
         if abs(C_) > 1e-12 and A_ * C_ > 0:
@@ -446,11 +446,11 @@ def simple_fit_errors(P: np.ndarray, N: np.ndarray) -> dict[str, float]:
     fr = cone_frame(P, N)
     if fr is not None:
         apex, a = fr
-        h, rho, _ = radial(P, apex, a)
+        h, rho = axial(P, apex, a)
         prims.append(("cone", Primitive("cone", {"apex": apex, "axis": a,
                                                  "half_angle": float(np.arctan2(rho.mean(), max(h.mean(), 1e-9)))})))
     ct, at, R0 = torus_frame(P, N)
-    h, rho, _ = radial(P, ct, at)
+    h, rho = axial(P, ct, at)
     prims.append(("torus", Primitive("torus", {"center": ct, "axis": at, "major_radius": float(abs(R0)),
                                                "minor_radius": float(np.hypot(rho - abs(R0), h).mean())})))
     for name, pr in prims:

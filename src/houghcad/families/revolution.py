@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from ._helix import GLOBAL_COMPLEX_RESIDUAL, relative_complex_residual
-from .base import (Frame, Family, Primitive, axis_from_normal_lines, radial, register,
+from .base import (Frame, Family, Primitive, axis_from_normal_lines, axial, radial, register,
                    regular_indices, tangent_basis, unit)
 from ._meridian import (ACTIVE, PROFILES, Profile, ProfilePlacement, meridian_conic_offset, meridian_local,
                         register_profile, set_active_profiles, solve_batched, theta_dict)
@@ -160,7 +160,7 @@ class SurfaceOfRevolution(Family):
                 origin = base.copy()
                 info = {"profile": name, "z0": 0.0}
                 if not prof.vote_offset:
-                    _, rho, _ = radial(P, origin, ax)
+                    _, rho = axial(P, origin, ax)
                     hh = (P - origin) @ ax
                     z0 = prof.offset(rho, hh)
                     if z0 is None or not np.isfinite(z0):
@@ -386,7 +386,7 @@ class SurfaceOfRevolution(Family):
                 res(x)
             u, nrm = state["u"], state["nrm"]
             pr = unpack(x)
-            h0, r0, _ = radial(P, pr.params["axis_point"], pr.params["axis"])
+            h0, r0 = axial(P, pr.params["axis_point"], pr.params["axis"])
             th = pr.params["theta"]
             c0 = prof.curve(u, th)
             J = np.empty((len(P), len(x)))
@@ -396,7 +396,7 @@ class SurfaceOfRevolution(Family):
                 xe[j] += d
                 if j < 5:
                     pe = unpack(xe)
-                    h1, r1, _ = radial(P, pe.params["axis_point"], pe.params["axis"])
+                    h1, r1 = axial(P, pe.params["axis_point"], pe.params["axis"])
                     J[:, j] = (nrm[:, 0] * (r1 - r0) + nrm[:, 1] * (h1 - h0)) / d
                 else:
                     te = th.copy()

@@ -11,7 +11,7 @@ from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
-from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, radial, register, swept_votes,
+from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, axial, radial, register, swept_votes,
                    tangent_basis, unit, unit_derivatives)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
@@ -163,7 +163,7 @@ class Torus(Family):
                                    "major_radius": float(values[0]), "minor_radius": float(values[1])})
 
     def distance(self, prim, P):
-        h, rho, _ = radial(P, prim.params["center"], prim.params["axis"])
+        h, rho = axial(P, prim.params["center"], prim.params["axis"])
         return np.abs(np.hypot(rho - prim.params["major_radius"], h) - prim.params["minor_radius"])
 
     def surface_normals(self, prim, P):
@@ -184,7 +184,7 @@ class Torus(Family):
 
         def res(x):
             c, a, R, r = unpack(x)
-            h, rho, _ = radial(P, c, a)
+            h, rho = axial(P, c, a)
             return np.hypot(rho - R, h) - r
 
         def jac(x):
