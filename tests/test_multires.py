@@ -103,6 +103,44 @@ def test_untrusted_normals_do_not_veto_crease_points():
     assert len(lenient.unsegmented) < len(strict.unsegmented) / 5
 
 
+def test_points_inside_a_segment_take_their_subsample_neighbours_normal(block):
+    """Only points whose subsample neighbours disagree estimate a normal of their own."""
+    seg = Segmenter(max_points=10000)
+    result = seg.fit(block.points).result_
+    sub_idx = voxel_subsample(block.points, 10000, seed=0).indices
+    labels = seg.segmentation_.labels
+    tree = cKDTree(block.points[sub_idx])
+    _, nb = tree.query(block.points, k=8)
+    lab = labels[sub_idx][nb]
+    inside = (lab[:, 0] >= 0) & (lab == lab[:, :1]).all(axis=1)
+    assert 0.5 < inside.mean() < 1.0
+    same = np.abs(np.einsum("ij,ij->i", result.normals, result.normals[sub_idx][nb[:, 0]]))
+    np.testing.assert_allclose(same[inside], 1.0, atol=1e-9)
+    # Along the edges the points' own normals: not all equal to a neighbour's.
+    assert np.mean(same[~inside] > 1 - 1e-9) < 0.9
+
+
+def test_points_off_the_surface_inside_a_segment_stay_unsegmented():
+    """Inside a segment the normal is not checked, the distance still is."""
+    cloud = synth.block_with_hole_and_slot(seed=2, n_points=40000)
+    clean = Segmenter(max_points=10000).fit(cloud.points).result_
+    eps = clean.options["derived"]["epsilon"]
+    sub = voxel_subsample(cloud.points, 10000, seed=0).indices
+    # Points lifted off the interior of the largest face, by 3 ε, pulled towards its centre so
+    # that they stay over it; the subsample keeps its points (a lifted point is in a voxel of its
+    # own, and a few extra points do not move the voxel size much).
+    face = np.setdiff1d(clean.segments[0].indices, sub)
+    centre = cloud.points[clean.segments[0].indices].mean(axis=0)
+    rng = np.random.default_rng(0)
+    lifted = rng.choice(face, 100, replace=False)
+    pts = cloud.points.copy()
+    pts[lifted] = centre + 0.5 * (pts[lifted] - centre) + 3 * eps * cloud.normals[lifted]
+    result = Segmenter(max_points=10000).fit(pts).result_
+    off = np.setdiff1d(lifted, voxel_subsample(pts, 10000, seed=0).indices)
+    assert len(off) >= 10
+    assert np.isin(off, result.unsegmented).mean() >= 0.9  # a few may land near another surface (the hole)
+
+
 def test_small_clouds_stay_whole_and_bad_sizes_are_refused(block):
     pts = block.points[:3000]
     r = Segmenter(max_points=5000).fit(pts).result_

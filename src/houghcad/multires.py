@@ -9,7 +9,9 @@ keeps every face its share of the surface area. After the pipeline has run on it
    candidates;
 2. it goes to the candidate whose surface is nearest, if that distance is within the subsample's
    removal distance ε and the point's normal, where it can be trusted, agrees with the surface's;
-   otherwise it stays unsegmented;
+   otherwise it stays unsegmented. Only points whose neighbours disagree (or are partly free)
+   need a normal of their own: the others lie inside one segment, whose subsample points passed
+   that test already, and take their nearest subsample point's normal;
 3. the output then refits every segment on a bounded random sample of all its points and
    computes its MFE on all of them (:func:`houghcad.output.build_segments`).
 
@@ -25,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .context import Context
+from .parallel import available_cores
 from .preprocess import Preprocessed, pca_normals
 from .state import Segmentation, surface_distance
 from .tolerances import ResolutionTolerances
@@ -103,29 +106,29 @@ class FullResolution:
     pre: Preprocessed
 
 
-def full_normals(x: np.ndarray, normals: np.ndarray | None, k: int, flat: float,
-                 workers: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals (n, 3) of the standard-frame points ``x`` and whether each can be trusted (n,):
-    the given ones, else PCA of the k nearest neighbours, chunk by chunk, trusted where the
-    neighbourhood is flat (surface variation λ0 / Σλ at most ``flat``). Across a crease PCA
-    averages the two faces' normals: such a normal says nothing about either face."""
-    if normals is not None:  # the file's: trusted where they have a length
-        length = np.linalg.norm(normals, axis=1)
-        ok = length > 0
-        return normals / np.where(ok, length, 1.0)[:, None], ok
-    tree = cKDTree(x)
-    out = np.empty_like(x)
-    trusted = np.empty(len(x), dtype=bool)
-    for a in range(0, len(x), CHUNK):
-        _, nb = tree.query(x[a:a + CHUNK], k=k, workers=workers)
-        out[a:a + CHUNK], ev = pca_normals(x, nb.astype(np.int32))
-        trusted[a:a + CHUNK] = ev[:, 0] <= flat * ev.sum(axis=1)
-    return out, trusted
+def _pca_rows(x: np.ndarray, rows: np.ndarray, tree: cKDTree, k: int, flat: float,
+              workers: int) -> tuple[np.ndarray, np.ndarray]:
+    """PCA normals (r, 3) of the points ``x[rows]`` from their k nearest neighbours in ``x``, and
+    whether each can be trusted (r,): the neighbourhood is flat (surface variation λ0 / Σλ at most
+    ``flat``). Across a crease PCA averages the two faces' normals: such a normal says nothing
+    about either face."""
+    if len(rows) == 0:
+        return np.empty((0, 3)), np.empty(0, dtype=bool)
+    _, nb = tree.query(x[rows], k=k, workers=workers)
+    nrm, ev = pca_normals(x, nb.astype(np.int32), workers=available_cores() if workers < 0 else workers)
+    return nrm, ev[:, 0] <= flat * ev.sum(axis=1)
 
 
 def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.ndarray,
               normals: np.ndarray | None, tol: ResolutionTolerances, workers: int = -1) -> FullResolution:
     """Label every input point from the segmentation ``sub`` of its subsample.
+
+    A point whose subsample neighbours all belong to one segment lies inside it: only its
+    distance to that surface is checked, and its normal is its nearest subsample point's (the
+    subsample's normals were checked against that surface already). Where the neighbours
+    disagree, or some are free, the point may sit on a crease or on a face the subsample did not
+    resolve: its own normal is estimated (PCA of its ``normals_neighbours`` nearest input points,
+    unless the file has normals) and must agree with the surface's where it can be trusted.
 
     Parameters
     ----------
@@ -143,8 +146,9 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
     pre = ctx.pre
     T = pre.transform
     x = T.points(points)
-    nrm, trusted = full_normals(x, None if normals is None else T.dirs(normals), tol.normals_neighbours,
-                                tol.flat_variation, workers)
+    given = None if normals is None else T.dirs(normals)
+    full_tree = None if given is not None else cKDTree(x)
+    nrm = np.empty_like(x)
     labels = np.full(len(x), -1, dtype=np.int32)
     part_of = _part_ids(sub)
     parts_full = np.full(len(x), -1, dtype=np.int32)
@@ -152,10 +156,13 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
     cos_min = float(np.cos(np.radians(tol.angle_deg)))
     k = min(tol.neighbours, len(picked))
     for a in range(0, len(x), CHUNK):
-        X, N, sure = x[a:a + CHUNK], nrm[a:a + CHUNK], trusted[a:a + CHUNK]
+        X = x[a:a + CHUNK]
         _, nb = pre.tree.query(X, k=k, workers=workers)
         nb = nb.reshape(len(X), k).astype(np.int32)
-        rows, segs, near = _candidates(sub.labels[nb], nb)
+        lab = sub.labels[nb]
+        N, sure = _chunk_normals(x, a, lab, pre.normals[nb[:, 0]], given, full_tree, tol, workers)
+        nrm[a:a + CHUNK] = N
+        rows, segs, near = _candidates(lab, nb)
         best = np.full(len(X), np.inf)
         choice = np.full(len(X), -1, dtype=np.int32)
         # Pairs grouped by segment with one sort, not one scan of every pair per segment.
@@ -165,8 +172,11 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
             r = rows[sel]
             rec = sub.records[s]
             d, claimed = surface_distance(rec, X[r])
-            cos = np.abs(np.einsum("ij,ij->i", rec.family.surface_normals(rec.prim, X[r]), N[r]))
-            ok = (d <= reach) & ((cos >= cos_min) | ~sure[r])
+            ok = d <= reach
+            check = sure[r]
+            if check.any():
+                cos = np.abs(np.einsum("ij,ij->i", rec.family.surface_normals(rec.prim, X[r[check]]), N[r[check]]))
+                ok[check] &= cos >= cos_min
             if claimed is not None:  # a fillet's arc takes the points it claims outright
                 ok |= claimed
             better = ok & (d < best[r])
@@ -174,9 +184,11 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
             choice[r[better]] = s
             parts_full[a + r[better]] = part_of[near[sel][better]]
         labels[a:a + CHUNK] = choice
-    # The subsample's own points keep the labels the pipeline gave them.
+    # The subsample's own points keep the labels and normals the pipeline gave them.
     labels[picked] = sub.labels
     parts_full[picked] = part_of
+    if given is None:
+        nrm[picked] = pre.normals
     seg = Segmentation(len(x))
     seg.records = list(sub.records)
     seg.relabel(labels)
@@ -184,6 +196,24 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
         seg.parts = [_pieces(seg.indices(s), parts_full) for s in range(len(sub))]
     seg.groups = list(sub.groups)
     return FullResolution(seg=seg, pre=replace(pre, points=x, normals=nrm, crease=None))
+
+
+def _chunk_normals(x: np.ndarray, a: int, lab: np.ndarray, nearest: np.ndarray, given: np.ndarray | None,
+                   tree: cKDTree | None, tol: ResolutionTolerances, workers: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normals (c, 3) of the chunk of ``x`` from row ``a`` whose subsample neighbours' labels are
+    ``lab`` (c, k), and which of them the propagation checks (c,), see :func:`propagate`.
+    ``nearest``: the nearest subsample point's normal of each row; ``given``: the file's normals
+    (all rows, standard frame) or None; ``tree``: on ``x`` when they are None."""
+    c = len(lab)
+    inside = (lab[:, 0] >= 0) & (lab == lab[:, :1]).all(axis=1)
+    if given is not None:  # the file's: trusted where they have a length
+        length = np.linalg.norm(given[a:a + c], axis=1)
+        return given[a:a + c] / np.where(length > 0, length, 1.0)[:, None], (length > 0) & ~inside
+    N, sure = nearest.copy(), np.zeros(c, dtype=bool)
+    edge = np.flatnonzero(~inside)
+    assert tree is not None
+    N[edge], sure[edge] = _pca_rows(x, a + edge, tree, tol.normals_neighbours, tol.flat_variation, workers)
+    return N, sure
 
 
 def _candidates(labels: np.ndarray, nb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
