@@ -303,6 +303,22 @@ def test_crease_points_are_the_voted_ones_on_a_clean_part_only():
     assert preprocess(cloud.points, cloud.normals).crease is None
 
 
+def test_a_cloud_read_as_noisy_has_no_crease_points():
+    """Between the noise policy's threshold and the one that widens PCA, noise keeps every
+    neighbourhood off its local quadric: the crease test would flag nearly every point."""
+    from houghcad.noise import NOISY_SPACINGS
+
+    cloud = synth.gear_like(seed=0, n_points=100_000, noise=0.0005)
+    pre = preprocess(cloud.points, seed=0)
+    assert pre.noise >= NOISY_SPACINGS * pre.spacing and pre.normals_method == "pca"
+    assert pre.crease is None
+    pca = preprocess(cloud.points, method="pca", seed=0)
+    np.testing.assert_array_equal(pre.normals, pca.normals)
+    # Read as clean on request, the same cloud votes its crease normals: nearly all of them.
+    clean = preprocess(cloud.points, seed=0, noise="clean")
+    assert clean.crease is not None and clean.crease.mean() > 0.9
+
+
 def test_input_normals_are_used_as_given():
     cloud = synth.single("cylinder", 0, n_points=2000, noise=0.003)
     pre = preprocess(cloud.points, cloud.normals)

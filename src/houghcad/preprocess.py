@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 from .errors import InputError
 from .hough import direction_accumulator, refine_direction
 
+from .noise import choose as choose_policy
 from .normals import ROWS, by_rows, pca_normals, quadric_residuals, voting_normals
 
 __all__ = ["ROWS", "Preprocessed", "Similarity", "by_rows", "pca_normals", "preprocess", "quadric_residuals",
@@ -341,11 +342,16 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
     if method == "voting":
         nrm = voting_normals(x, nbr, seed=seed)
         used = "voting"
-    elif method == "auto" and used == "pca" and hood.qres is not None:
+    elif method == "auto" and used == "pca" and hood.qres is not None and \
+            not choose_policy(noise_policy, noise, hood.spacing).noisy:
         # Clean cloud: PCA averages the two sides of a crease, and on a
         # face two or three spacings wide (a groove wall, a chamfer) its
         # neighbourhoods are mostly the neighbours' points. No local
-        # quadric explains a crease, while curvature alone it does.
+        # quadric explains a crease, while curvature alone it does. On a
+        # cloud the noise policy reads as noisy, noise keeps every
+        # neighbourhood off its quadric: all its points would read as
+        # crease points, and triples of noisy points vote worse normals
+        # than PCA does.
         on_crease = hood.qres > CREASE * hood.spacing
         crease = np.flatnonzero(on_crease)
         if len(crease):
