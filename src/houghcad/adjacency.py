@@ -69,7 +69,7 @@ class SegmentGraph:
             a, b = owned[close[:, 0]], owned[close[:, 1]]
         else:
             tree = cKDTree(P) if tree is None else tree
-            dist, nb = tree.query(P[owned], k=min(k, len(P)), distance_upper_bound=link)
+            dist, nb = tree.query(P[owned], k=min(k, len(P)), distance_upper_bound=link, workers=-1)
             ok = np.isfinite(dist)
             a = np.broadcast_to(owned[:, None], nb.shape)[ok]
             b = nb[ok].astype(np.int64)

@@ -16,7 +16,7 @@ def _neighbour_owners(owner: np.ndarray, pts: np.ndarray, ctx: Context, reach: f
     """The k nearest neighbours (m, k) of the points ``pts`` within ``reach``
     (missing ones as index 0) and their segments in ``owner`` (-1: none)."""
     P = ctx.pre.points
-    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach)
+    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach, workers=-1)
     ok = np.isfinite(dist)
     nb = np.where(ok, nb, 0)
     return nb, np.where(ok, owner[nb], -1)

@@ -47,7 +47,7 @@ def absorb(seg: Segmentation, ctx: Context) -> None:
     owner = seg.labels
     assigned = np.flatnonzero(owner >= 0)
     P = ctx.pre.points
-    dist, j = cKDTree(P[assigned]).query(P[rest], distance_upper_bound=2 * ctx.link)
+    dist, j = cKDTree(P[assigned]).query(P[rest], distance_upper_bound=2 * ctx.link, workers=-1)
     ok = np.isfinite(dist)
     rest, near = rest[ok], owner[assigned[j[ok]]]
     for k in np.unique(near).tolist():

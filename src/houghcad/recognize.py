@@ -467,7 +467,7 @@ def voting_context(idx: np.ndarray, ctx: Context) -> Context:
     the axis votes read (:func:`houghcad.families.cylinder.axis_candidates`, also inside the
     complex families' fits)."""
     k = min(ctx.tol.recognition.neighbours, len(idx))
-    return replace(ctx, neighbors=cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k)[1])
+    return replace(ctx, neighbors=cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k, workers=-1)[1])
 
 
 def refine(seg: Segmentation, families: list[Family], ctx: Context) -> None:
