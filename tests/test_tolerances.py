@@ -73,3 +73,26 @@ def test_a_tolerance_changes_what_the_run_does(part):
 
 def test_docs_list_every_tolerance():
     assert DOCS.read_text() == markdown(), "regenerate: python -m houghcad.tolerances > docs/tolerances.md"
+
+
+def test_the_smallest_segment_is_a_size_on_the_part():
+    """The default smallest segment is a patch ``min_face_diagonals`` wide at the cloud's density:
+    the same patch on the part whatever the sampling, so its points grow with the density."""
+    from houghcad.context import derive_context, points_in_patch
+    from houghcad.noise import CLEAN
+    from houghcad.preprocess import preprocess
+
+    t = Tolerances()
+    sizes = {}
+    for n in (4_000, 60_000, 240_000):
+        pre = preprocess(synth.gear_like(seed=0, n_points=n).points, workers=2)
+        ctx = derive_context(pre, n, t, CLEAN)
+        want = points_in_patch(pre, t.scale.min_face_diagonals * pre.diagonal)
+        assert ctx.min_points == max(t.scale.min_points_floor, int(want))
+        sizes[n] = want
+    # Points per patch follow the density (a patch's area over a point's share of it).
+    assert sizes[240_000] / sizes[60_000] == pytest.approx(4.0, rel=0.15)
+    assert ctx.min_points > t.scale.min_points_floor
+    # A sparse cloud keeps the floor: fewer points do not pin a primitive down.
+    small = preprocess(synth.gear_like(seed=0, n_points=4_000).points)
+    assert derive_context(small, 4_000, t, CLEAN).min_points == t.scale.min_points_floor

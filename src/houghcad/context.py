@@ -13,6 +13,8 @@ from .tolerances import ScaleTolerances, Tolerances
 
 #: Guards divisions by a zero spacing (standard units).
 _TINY = 1e-12
+#: Neighbours within the reach (the median distance to the 6th nearest point, :class:`Preprocessed`).
+REACH_NEIGHBOURS = 6
 #: Peak persistence threshold, a fraction of the accumulator's maximum.
 DEFAULT_PERSISTENCE = 0.1
 _SCALE = ScaleTolerances()
@@ -82,6 +84,12 @@ class Context:
         return float(np.cos(self.angle))
 
 
+def points_in_patch(pre: Preprocessed, width: float) -> float:
+    """About how many of the cloud's points a patch of surface ``width`` across holds (standard
+    units): at the median density, where a point has 6 neighbours within ``pre.reach``."""
+    return REACH_NEIGHBOURS / (np.pi * max(pre.reach, _TINY) ** 2) * width ** 2
+
+
 def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: NoisePolicy,
                    epsilon: float | None = None, min_points: int | None = None,
                    persistence: float = DEFAULT_PERSISTENCE,
@@ -91,7 +99,8 @@ def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: No
     ``epsilon``: the removal distance as a fraction of the diagonal (None:
     ``tol.scale.epsilon_taus`` × τ, or ``noisy_epsilon_taus`` × τ under the
     noisy policy); ``min_points``: the smallest segment
-    (None: from the number of points).
+    (None: a patch ``tol.scale.min_face_diagonals`` wide at the cloud's density,
+    see :func:`points_in_patch`).
     """
     t = tol.scale
     s = pre.spacing
@@ -100,7 +109,8 @@ def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: No
     eps = eps_taus * tau if epsilon is None else float(epsilon) * pre.diagonal
     tau = min(tau, eps)
     angle = np.radians(min(t.angle_max_deg, t.angle_deg + t.angle_deg_per_noise * pre.noise / max(s, _TINY)))
-    mp = min_points if min_points is not None else max(t.min_points_floor, n_points // t.points_per_min_point)
+    mp = min_points if min_points is not None else \
+        max(t.min_points_floor, int(points_in_patch(pre, t.min_face_diagonals * pre.diagonal)))
     return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle),
                    link=max(t.link_spacings * s, t.link_reach * pre.reach) + t.link_sigmas * pre.noise,
                    cell=max(tau, t.cell_spacings * s), min_points=int(mp), max_radius=t.max_radius,

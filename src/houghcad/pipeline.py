@@ -231,7 +231,8 @@ class Segmenter:
     persistence : float
         Peak persistence threshold, a fraction of the accumulator's maximum.
     min_points : int, optional
-        Smallest segment; default max(8, n / 5000).
+        Smallest segment; default the points of a patch ``min_face_diagonals`` (1.5 %) of the
+        diagonal wide at the cloud's density, at least 8 (see ``context.points_in_patch``).
     seed : int
         Seed of every random choice.
     progress : callable, optional
