@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .context import Context
+from .context import Context, threads
 from .state import Segmentation
 
 
@@ -50,7 +50,7 @@ class SegmentGraph:
 
     @classmethod
     def build(cls, labels: np.ndarray, P: np.ndarray, link: float, k: int | None = None,
-              tree: cKDTree | None = None) -> "SegmentGraph":
+              tree: cKDTree | None = None, workers: int = 1) -> "SegmentGraph":
         """The graph of the segments ``labels`` (n,) (-1: free) over points P (n, 3).
 
         With ``k`` the contacts are each segmented point's k nearest points
@@ -58,7 +58,8 @@ class SegmentGraph:
         from the querying point: ``close_pairs`` counts these directed pairs,
         ``contact`` the distinct querying points on each side, and ``cross``
         holds (querying point, neighbour). Without it every pair of segmented
-        points closer than ``link`` counts once.
+        points closer than ``link`` counts once. ``workers``: the query's
+        threads (the result does not depend on them).
         """
         labels = np.asarray(labels, dtype=np.int64)
         m = max(int(labels.max(initial=-1)) + 1, 1)
@@ -69,7 +70,7 @@ class SegmentGraph:
             a, b = owned[close[:, 0]], owned[close[:, 1]]
         else:
             tree = cKDTree(P) if tree is None else tree
-            dist, nb = tree.query(P[owned], k=min(k, len(P)), distance_upper_bound=link, workers=-1)
+            dist, nb = tree.query(P[owned], k=min(k, len(P)), distance_upper_bound=link, workers=workers)
             ok = np.isfinite(dist)
             a = np.broadcast_to(owned[:, None], nb.shape)[ok]
             b = nb[ok].astype(np.int64)
@@ -97,7 +98,7 @@ class SegmentGraph:
     @classmethod
     def of(cls, seg: Segmentation, ctx: Context, k: int | None = None) -> "SegmentGraph":
         """The graph of a segmentation state, at the run's link distance (see :meth:`build`)."""
-        return cls.build(seg.labels, ctx.pre.points, ctx.link, k, ctx.pre.tree)
+        return cls.build(seg.labels, ctx.pre.points, ctx.link, k, ctx.pre.tree, threads(ctx))
 
     def neighbours(self, keep: np.ndarray | None = None) -> dict[int, set[int]]:
         """Each segment's neighbours over the edges ``keep`` (bool (k,); default all)."""

@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 from .families import Family
 from .families.base import Primitive, unit
 from .adjacency import SegmentGraph
-from .context import Context
+from .context import Context, threads
 from .state import SegmentRecord, SegmentView, Segmentation
 from .corners import Arc, FilletFit, Section, fit_fillet, profile_distance, section
 from .tolerances import FilletTolerances
@@ -126,7 +126,7 @@ def _fillet_pass(seg: Segmentation, families: list[Family], ctx: Context) -> int
     if len(seg) < 2 or not ({"cylinder", "torus"} & set(by_name)):
         return 0
     pairs, nbrs = _corner_pairs(seg, ctx)
-    near = _Near(seg, ctx.pre.points, ctx.tol.fillets.reach_diagonals * ctx.pre.diagonal)
+    near = _Near(seg, ctx.pre.points, ctx.tol.fillets.reach_diagonals * ctx.pre.diagonal, threads(ctx))
     found = [p for i, j in pairs if (p := _propose(seg, i, j, nbrs, by_name, near, ctx)) is not None]
     return _apply(seg, found, ctx)
 
@@ -211,8 +211,8 @@ class _Near:
 
     COARSE = 8
 
-    def __init__(self, seg: Segmentation, P: np.ndarray, reach: float):
-        self.seg, self.P, self.reach = seg, P, reach
+    def __init__(self, seg: Segmentation, P: np.ndarray, reach: float, workers: int = 1):
+        self.seg, self.P, self.reach, self.workers = seg, P, reach, workers
         self.h = reach / self.COARSE
         self._trees: dict[int, tuple[cKDTree, cKDTree]] = {}
 
@@ -229,11 +229,11 @@ class _Near:
         """The points ``idx`` (global indices) within ``reach`` of segment ``k``'s points."""
         full, coarse = self._of(k)
         X = self.P[idx]
-        d = coarse.query(X, distance_upper_bound=2 * self.reach, workers=-1)[0]
+        d = coarse.query(X, distance_upper_bound=2 * self.reach, workers=self.workers)[0]
         ok = d <= self.reach
         unsure = np.flatnonzero(~ok & (d <= self.reach + np.sqrt(3) * self.h))
         if len(unsure):
-            ok[unsure] = np.isfinite(full.query(X[unsure], distance_upper_bound=self.reach, workers=-1)[0])
+            ok[unsure] = np.isfinite(full.query(X[unsure], distance_upper_bound=self.reach, workers=self.workers)[0])
         return idx[ok]
 
 

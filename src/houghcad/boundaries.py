@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .context import Context
+from .context import Context, threads
 from .state import Segmentation, surface_distance
 
 
@@ -16,7 +16,7 @@ def _neighbour_owners(owner: np.ndarray, pts: np.ndarray, ctx: Context, reach: f
     """The k nearest neighbours (m, k) of the points ``pts`` within ``reach``
     (missing ones as index 0) and their segments in ``owner`` (-1: none)."""
     P = ctx.pre.points
-    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach, workers=-1)
+    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach, workers=threads(ctx))
     ok = np.isfinite(dist)
     nb = np.where(ok, nb, 0)
     return nb, np.where(ok, owner[nb], -1)

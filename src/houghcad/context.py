@@ -84,6 +84,13 @@ class Context:
         return float(np.cos(self.angle))
 
 
+def threads(ctx: Context) -> int:
+    """Threads for a KD-tree query or per-point fit over a whole cloud: the run's jobs (1 inside a
+    forked worker, and when a batch runs one job per cloud beside others). Results do not depend
+    on it."""
+    return max(int(getattr(ctx.workers, "n_jobs", 1)), 1)
+
+
 def points_in_patch(pre: Preprocessed, width: float) -> float:
     """About how many of the cloud's points a patch of surface ``width`` across holds (standard
     units): at the median density, where a point has 6 neighbours within ``pre.reach``."""

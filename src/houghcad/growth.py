@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .context import Context
+from .context import Context, threads
 from .state import Candidate, Segmentation, surface_distance
 
 
@@ -47,7 +47,7 @@ def absorb(seg: Segmentation, ctx: Context) -> None:
     owner = seg.labels
     assigned = np.flatnonzero(owner >= 0)
     P = ctx.pre.points
-    dist, j = cKDTree(P[assigned]).query(P[rest], distance_upper_bound=2 * ctx.link, workers=-1)
+    dist, j = cKDTree(P[assigned]).query(P[rest], distance_upper_bound=2 * ctx.link, workers=threads(ctx))
     ok = np.isfinite(dist)
     rest, near = rest[ok], owner[assigned[j[ok]]]
     for k in np.unique(near).tolist():

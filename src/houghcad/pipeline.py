@@ -438,7 +438,8 @@ class Segmenter:
         if picked is not None:  # every input point from its subsample neighbours (multires)
             t = time.perf_counter()
             run.progress("propagate", _PROPAGATE_AT)
-            full = propagate(seg, run.ctx, picked.indices, points, saved.normals, run.ctx.tol.resolution)
+            full = propagate(seg, run.ctx, picked.indices, points, saved.normals, run.ctx.tol.resolution,
+                             workers=resolve_jobs(self.n_jobs))
             seg, run = full.seg, replace(run, ctx=replace(run.ctx, pre=full.pre))
             timing = {**timing, "propagate": time.perf_counter() - t}
         self.segmentation_ = seg

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .context import Context
+from .context import Context, threads
 from .families import Family, Primitive
 from .hough import Grid, accumulate, persistent_peaks, smooth
 from .state import Candidate, SegmentRecord, Segmentation, mean_fitting_error
@@ -467,7 +467,7 @@ def voting_context(idx: np.ndarray, ctx: Context) -> Context:
     the axis votes read (:func:`houghcad.families.cylinder.axis_candidates`, also inside the
     complex families' fits)."""
     k = min(ctx.tol.recognition.neighbours, len(idx))
-    return replace(ctx, neighbors=cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k, workers=-1)[1])
+    return replace(ctx, neighbors=cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k, workers=threads(ctx))[1])
 
 
 def refine(seg: Segmentation, families: list[Family], ctx: Context) -> None:
