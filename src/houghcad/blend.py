@@ -40,6 +40,7 @@ from .families import Family
 from .families.base import Primitive, unit
 from .adjacency import SegmentGraph
 from .context import Context, threads
+from .multires import voxel_keys
 from .state import SegmentRecord, SegmentView, Segmentation
 from .corners import Arc, FilletFit, Section, fit_fillet, profile_distance, section
 from .tolerances import FilletTolerances
@@ -219,9 +220,7 @@ class _Near:
     def _of(self, k: int) -> tuple[cKDTree, cKDTree]:
         if k not in self._trees:
             Q = self.P[self.seg[k].indices]
-            cells = np.floor((Q - Q.min(axis=0)) / self.h).astype(np.int64)
-            key = (cells[:, 0] * (cells[:, 1].max() + 1) + cells[:, 1]) * (cells[:, 2].max() + 1) + cells[:, 2]
-            _, first = np.unique(key, return_index=True)
+            _, first = np.unique(voxel_keys(Q, Q.min(axis=0), self.h), return_index=True)
             self._trees[k] = (cKDTree(Q), cKDTree(Q[first]))
         return self._trees[k]
 

@@ -27,12 +27,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .context import Context
-from .parallel import available_cores
+from .parallel import resolve_jobs
 from .preprocess import Preprocessed, pca_normals
 from .state import Segmentation, surface_distance
 from .tolerances import ResolutionTolerances
 
-__all__ = ["CHUNK", "Subsample", "voxel_subsample", "FullResolution", "propagate"]
+__all__ = ["CHUNK", "Subsample", "voxel_keys", "voxel_subsample", "FullResolution", "propagate"]
 
 #: Points handled at once by the propagation and the normal estimate (bounds the temporary tables).
 CHUNK = 1 << 18
@@ -58,7 +58,7 @@ class Subsample:
     voxel: float
 
 
-def _occupied(points: np.ndarray, lo: np.ndarray, h: float) -> np.ndarray:
+def voxel_keys(points: np.ndarray, lo: np.ndarray, h: float) -> np.ndarray:
     """Voxel key (n,) int64 of each point for voxels of edge h from corner lo."""
     cells = np.floor((points - lo) / h).astype(np.int64)
     dims = cells.max(axis=0) + 1
@@ -75,16 +75,16 @@ def voxel_subsample(points: np.ndarray, max_points: int, seed: int = 0) -> Subsa
     lo = points.min(axis=0)
     diag = float(np.linalg.norm(np.ptp(points, axis=0)))
     h0 = diag / _COARSE_CELLS
-    area = len(np.unique(_occupied(points, lo, h0))) * h0 * h0
+    area = len(np.unique(voxel_keys(points, lo, h0))) * h0 * h0
     h = float(np.sqrt(area / max_points))
     for _ in range(_VOXEL_STEPS):
-        keys = _occupied(points, lo, h)
+        keys = voxel_keys(points, lo, h)
         count = len(np.unique(keys))
         if count <= max_points:
             break
         h *= float(np.sqrt(count / max_points)) * 1.02  # a surface fills voxels as 1 / h²
     else:
-        keys = _occupied(points, lo, h)
+        keys = voxel_keys(points, lo, h)
     order = np.random.default_rng(seed).permutation(len(points))
     _, first = np.unique(keys[order], return_index=True)
     return Subsample(indices=np.sort(order[first]).astype(np.int64), voxel=h)
@@ -115,7 +115,7 @@ def _pca_rows(x: np.ndarray, rows: np.ndarray, tree: cKDTree, k: int, flat: floa
     if len(rows) == 0:
         return np.empty((0, 3)), np.empty(0, dtype=bool)
     _, nb = tree.query(x[rows], k=k, workers=workers)
-    nrm, ev = pca_normals(x, nb.astype(np.int32), workers=available_cores() if workers < 0 else workers)
+    nrm, ev = pca_normals(x, nb.astype(np.int32), workers=resolve_jobs(workers))
     return nrm, ev[:, 0] <= flat * ev.sum(axis=1)
 
 
