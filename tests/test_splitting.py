@@ -9,9 +9,11 @@ import houghcad
 from _helpers import context
 from houghcad import synth
 from houghcad.families import select
+from houghcad.families.base import Primitive
 from houghcad.pipeline import Segmenter
-from houghcad.splitting import clusters, splitting_phase
-from houghcad.state import Segmentation
+from houghcad.families import REGISTRY
+from houghcad.splitting import _still_free, clusters, on_one_line, splitting_phase
+from houghcad.state import Candidate, Segmentation
 
 
 def test_splitting_phase_segments_a_free_cloud_on_its_own():
@@ -74,3 +76,38 @@ def test_small_holes_are_found_about_the_plate_normal():
         best = int(np.bincount(own).argmax())
         dsc = 2 * np.sum(lab[g] == best) / (len(g) + len(faces[best]))
         assert types[best] == "cylinder" and dsc > 0.9, (types[best], dsc)
+
+
+def test_points_on_one_line_are_told_from_a_strip():
+    t = np.linspace(0.0, 1.0, 30)[:, None]
+    line = np.array([0.3, -0.2, 0.1]) + t * np.array([1.0, 2.0, -0.5])
+    assert on_one_line(line)
+    assert on_one_line(np.repeat(line[:1], 5, axis=0))
+    strip = line + np.array([0.0, 0.0, 1e-4]) * (np.arange(30) % 2)[:, None]
+    assert not on_one_line(strip)
+
+
+def test_a_candidate_left_a_line_of_points_keeps_its_fit():
+    # A cone cut to the points of one of its generatrices: every cone through
+    # that line fits them exactly, so a refit there would be arbitrary.
+    rng = np.random.default_rng(0)
+    alpha = 0.3
+    h, phi = rng.uniform(0.5, 2.0, 600), rng.uniform(0, 2 * np.pi, 600)
+    surface = np.c_[h * np.tan(alpha) * np.cos(phi), h * np.tan(alpha) * np.sin(phi), h]
+    line = np.linspace(0.5, 2.0, 40)[:, None] * np.array([np.sin(alpha), 0.0, np.cos(alpha)])
+    ctx = context(np.r_[surface, line])
+    cone = REGISTRY["cone"]
+    T = ctx.pre.transform
+    start = cone.fit(Primitive("cone", {"apex": T.points(np.zeros(3)), "axis": T.dirs(np.array([0, 0, 1.0])),
+                                        "half_angle": alpha}), ctx.pre.points[:600], ctx.pre.normals[:600])
+    idx = np.arange(640)
+    c = Candidate(cone, start, idx, 0.0, np.zeros(640))
+    avail = np.zeros(640, bool)
+    avail[600:] = True
+    (kept,) = _still_free([c], avail, ctx)
+    assert kept.prim is start
+    np.testing.assert_array_equal(kept.indices, np.arange(600, 640))
+    avail[:300] = True  # a piece of the surface as well: refitted on it
+    (refit,) = _still_free([c], avail, ctx)
+    assert refit.prim is not start
+    assert abs(refit.prim.params["half_angle"] - alpha) < 1e-6

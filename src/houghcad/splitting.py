@@ -38,6 +38,10 @@ def clusters(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
 #: Clusters go to the workers one per task unless the largest holds more than this share of
 #: their points (then its own families and peaks are spread instead).
 CLUSTER_SHARE = 0.5
+#: Second principal spread of a point set, as a share of the first, at or below which the
+#: points lie on one line: float64 rounding of coordinates is ~1e-16 of the extent, and a
+#: face of any real width is many orders above this.
+ROUNDING_SPREAD = 1e-9
 
 
 def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
@@ -98,7 +102,12 @@ def _still_free(found: list[Candidate], avail: np.ndarray, ctx: Context) -> list
         elif keep.sum() >= ctx.min_points:
             # Refitted on what is left, as recognising the cluster now would.
             idx = c.indices[keep]
-            prim = c.family.fit(c.prim, ctx.pre.points[idx], ctx.pre.normals[idx])
+            P = ctx.pre.points[idx]
+            # Points on one line determine no surface: every primitive of a
+            # family through that line fits them exactly, and the refit would
+            # stop wherever rounding sends it along that family (different
+            # answers from bit-identical inputs). The candidate keeps its fit.
+            prim = None if on_one_line(P) else c.family.fit(c.prim, P, ctx.pre.normals[idx])
             ok = prim is not None and c.family.valid(prim, ctx)
             out.append(replace(c, prim=prim if ok else c.prim, indices=idx))
     return out
@@ -230,3 +239,11 @@ def _circle_about(a: np.ndarray, X: np.ndarray, ctx: Context) -> Primitive | Non
         return None
     return Primitive("cylinder", {"axis_point": R.T @ np.array([sol[0], sol[1], 0.0]), "axis": a,
                                   "radius": float(np.sqrt(r2))})
+
+
+def on_one_line(P: np.ndarray) -> bool:
+    """Whether the points P (n, 3) lie on one line, or at one point, to
+    rounding: their second principal spread is a rounding-sized fraction of
+    the first."""
+    s = np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
+    return bool(s[1] <= ROUNDING_SPREAD * s[0])
