@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from houghcad import synth
-from houghcad.hough import DirectionAccumulator, Grid, accumulate, persistent_peaks, refine_direction
+from houghcad.hough import (DirectionAccumulator, Grid, _line_vote, accumulate, normal_line_peaks, persistent_peaks,
+                            refine_direction)
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -280,3 +281,32 @@ def test_direction_accumulator_max_peaks(acc):
     dirs, _ = acc.peaks(acc.smooth(acc.vote(N)), 0.1, max_peaks=2)
     assert len(dirs) == 2
     _match_directions(dirs, truth[:2], 4.0)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_normal_line_votes_are_accumulate_on_the_lines_samples(d):
+    # The walk along each normal line gives exactly what accumulating its
+    # samples does, once per (point, cell), including samples off the grid.
+    rng = np.random.default_rng(d)
+    Q = rng.normal(size=(300, d))
+    M = rng.normal(size=(300, d))
+    M /= np.linalg.norm(M, axis=1, keepdims=True)
+    lo, ext, bins = Q.min(axis=0), float(np.ptp(Q, axis=0).max()), 23
+    g = Grid(tuple(lo), tuple(lo + ext), (bins,) * d)
+    s = np.arange(ext / bins, 0.7 * ext, ext / bins)
+    s = np.r_[-s, s]
+    samples = (Q[:, None, :] + s[None, :, None] * M[:, None, :]).reshape(-1, d)
+    want = accumulate(g, np.repeat(np.arange(len(Q)), len(s)), samples).ravel()
+    H = np.zeros(want.size)
+    _line_vote(Q, M, s, np.asarray(g.lower, float), g.width.astype(float), np.asarray(g.bins, np.int64), H)
+    np.testing.assert_array_equal(H, want)
+
+
+def test_normal_lines_of_a_circle_meet_at_its_centre():
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    M = np.c_[np.cos(t), np.sin(t)]
+    Q = np.array([0.3, -0.2]) + 0.5 * M
+    lo = Q.min(axis=0)
+    ext = float(np.ptp(Q, axis=0).max())
+    (c,) = normal_line_peaks(Q, M, lo, ext, 40, 0.6 * ext, 0.1, 10.0, 5)
+    assert np.linalg.norm(c - [0.3, -0.2]) <= ext / 40

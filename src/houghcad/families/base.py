@@ -36,6 +36,19 @@ import numpy as np
 from ..errors import InputError
 from ..hough import Grid
 from ..preprocess import Similarity
+from ._geometry import (  # noqa: F401
+    axial,
+    axis_from_normal_lines,
+    frame_turn_rows,
+    gauss_newton,
+    lines_intersection,
+    planes_intersection,
+    radial,
+    regular_indices,
+    tangent_basis,
+    unit,
+    unit_derivatives,
+)
 from ._sampling import Sampler
 
 #: Values of :attr:`Family.role`.
@@ -360,163 +373,3 @@ def swept_votes(kernel, Pl: np.ndarray, grid: Grid) -> np.ndarray:
     kernel(Pl[:, 2].astype(float), np.hypot(Pl[:, 0], Pl[:, 1]), grid.centers(0), float(grid.lower[1]),
            float(grid.width[1]), H)
     return H
-
-
-def unit(v: np.ndarray) -> np.ndarray:
-    v = np.asarray(v, float)
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 0, n, 1.0)
-
-
-def regular_indices(n: int, m: int) -> np.ndarray:
-    """At most m regularly spaced indices of range(n) (all of them when n <= m),
-    for deterministic subsamples of point sets."""
-    return np.arange(n) if n <= m else np.linspace(0, n - 1, m).astype(np.int64)
-
-
-def tangent_basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors completing ``a`` to an orthonormal basis."""
-    a = unit(a)
-    h = np.eye(3)[int(np.argmin(np.abs(a)))]
-    e1 = unit(np.cross(a, h))
-    return e1, np.cross(a, e1)
-
-
-def unit_derivatives(b: np.ndarray, dirs: tuple[np.ndarray, ...]) -> np.ndarray:
-    """Derivatives (3, k) of ``unit(b)`` along the directions ``dirs`` (k vectors (3,)):
-    ``(I - a a^T) e / |b|`` with ``a = unit(b)``; the chain rule of an axis fitted as
-    ``unit(a0 + x1 e1 + x2 e2)``."""
-    nb = float(np.linalg.norm(b))
-    a = b / nb
-    E = np.asarray(dirs, float)
-    return ((E - np.outer(E @ a, a)) / nb).T
-
-
-def radial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Axial coordinate h (n,), radial distance rho (n,) and radial unit vectors (n, 3)."""
-    h, rho, v = _axial(P, point, axis)
-    return h, rho, v / np.where(rho > 1e-15, rho, 1.0)[:, None]
-
-
-def axial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Axial coordinate h (n,) and radial distance rho (n,) of the points P (n, 3) about the
-    axis through ``point``: :func:`radial` without the unit vectors, which distances do not
-    need (they are run on every candidate's points)."""
-    return _axial(P, point, axis)[:2]
-
-
-def _axial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    d = P - point
-    h = d @ axis
-    v = d - h[:, None] * axis
-    return h, np.linalg.norm(v, axis=1), v
-
-
-def lines_intersection(P: np.ndarray, D: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """Least-squares point closest to lines x = P_i + t D_i (unit D).
-
-    Returns the point (3,) and the conditioning (smallest/largest eigenvalue of
-    the normal matrix; near 0 when the lines are (nearly) parallel).
-    """
-    w = np.ones(len(P)) if w is None else w
-    A = np.eye(3)[None] - D[:, :, None] * D[:, None, :]
-    M = np.einsum("n,nij->ij", w, A)
-    b = np.einsum("n,nij,nj->i", w, A, P)
-    ev = np.linalg.eigvalsh(M)
-    if ev[-1] <= 0:
-        return np.zeros(3), 0.0
-    return np.linalg.lstsq(M, b, rcond=None)[0], float(ev[0] / ev[-1])
-
-
-def planes_intersection(P: np.ndarray, Nrm: np.ndarray) -> tuple[np.ndarray, float]:
-    """Least-squares point on all planes n_i·(x - p_i) = 0 (apex of a cone)."""
-    M = Nrm.T @ Nrm
-    b = Nrm.T @ np.einsum("ij,ij->i", Nrm, P)
-    ev = np.linalg.eigvalsh(M)
-    if ev[-1] <= 0:
-        return np.zeros(3), 0.0
-    return np.linalg.lstsq(M, b, rcond=None)[0], float(ev[0] / ev[-1])
-
-
-def axis_from_normal_lines(P: np.ndarray, Nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """Axis of a surface of revolution: the line meeting all normal lines.
-
-    Fits a linear line complex (c, c̄) to the normal lines (n_i, p_i × n_i) in
-    Plücker coordinates (Pottmann & Randrup): minimise Σ (c·(p_i×n_i) + c̄·n_i)²
-    with |c| = 1. For a surface of revolution the complex is singular (a line):
-    the axis. Points are centred first for conditioning.
-
-    Returns
-    -------
-    point : ndarray (3,), a point of the axis
-    direction : ndarray (3,), unit
-    pitch : float
-        c·c̄ / |c|²; about 0 for a surface of revolution (helical surfaces: not).
-    residual : float
-        Smallest eigenvalue per line (how well a single axis explains them).
-    """
-    m = P.mean(axis=0)
-    Q = P - m
-    L = np.hstack([np.cross(Q, Nrm), Nrm])
-    M = L.T @ L / len(P)
-    M11, M12, M22 = M[:3, :3], M[:3, 3:], M[3:, 3:]
-    try:
-        K = np.linalg.solve(M22 + 1e-12 * np.eye(3), M12.T)
-    except np.linalg.LinAlgError:
-        return m, np.array([0, 0, 1.0]), 0.0, np.inf
-    S = M11 - M12 @ K
-    w, v = np.linalg.eigh(0.5 * (S + S.T))
-    c = v[:, 0]
-    cb = -K @ c
-    pitch = float(c @ cb)
-    # Axis of the complex: point = c × c̄_0 / |c|² with the pitch part removed.
-    cb0 = cb - pitch * c
-    point = np.cross(c, cb0) + m
-    return point, c, pitch, float(max(w[0], 0.0))
-
-
-def gauss_newton(fun, x0: np.ndarray, iters: int = 8, tol: float = 1e-12) -> np.ndarray | None:
-    """Damped Gauss–Newton on ``fun(x) -> (residuals (n,), jacobian (n, k))``.
-
-    Hand-written because the families' analytic Jacobians make a few
-    iterations cost microseconds, where a generic solver's overhead dominates.
-    """
-    x = np.asarray(x0, float)
-    r, J = fun(x)
-    cost = r @ r
-    lam = 1e-6
-    for _ in range(iters):
-        A = J.T @ J
-        g = J.T @ r
-        try:
-            step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-15), -g)
-        except np.linalg.LinAlgError:
-            return None
-        xn = x + step
-        rn, Jn = fun(xn)
-        cn = rn @ rn
-        if not np.isfinite(cn):
-            return None
-        if cn <= cost:
-            x, r, J, cost = xn, rn, Jn, cn
-            lam = max(lam / 10, 1e-12)
-            if np.abs(step).max() < tol:
-                break
-        else:
-            lam *= 10
-    return x
-
-
-def frame_turn_rows(frame, x: np.ndarray, v: np.ndarray, tilt: tuple[int, ...], h: float = 1e-7) -> np.ndarray:
-    """Rows (3, k, m) of the derivatives of v @ f for each vector f of the
-    frame ``frame(x)`` (a tuple of 3-vectors) with respect to the k
-    parameters x; only the ``tilt`` columns turn the frame (finite
-    differences on 3-vectors, cheap), the others are zero. ``v`` (m, 3)."""
-    base = frame(x)
-    out = np.zeros((len(base), len(x), len(v)))
-    for j in tilt:
-        xe = x.copy()
-        xe[j] += h
-        for i, (fe, f0) in enumerate(zip(frame(xe), base)):
-            out[i, j] = v @ ((fe - f0) / h)
-    return out
