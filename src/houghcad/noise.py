@@ -5,7 +5,10 @@ on it: the estimated noise σ is at least :data:`NOISY_SPACINGS` point
 spacings (the 188 Fit4CAD training samples read at most 0.09, 99 % of them
 under 0.04). ``Segmenter(noise="auto"|"clean"|"noisy")`` chooses once; every
 pass reads the fields of the chosen :class:`NoisePolicy`, never σ against a
-threshold of its own.
+threshold of its own. Preprocessing alone decides before the policy exists, as it
+estimates σ: it widens the normals' neighbourhood from its own 16-neighbour estimate
+(:data:`houghcad.preprocess.WIDE_NORMALS_SPACINGS`), and skips crease voting when this
+policy would read the cloud as noisy.
 """
 
 from __future__ import annotations
@@ -25,9 +28,6 @@ class NoisePolicy:
     ----------
     name : str
         ``"clean"`` or ``"noisy"``.
-    wide_normals : bool
-        Preprocessing: PCA on 64 neighbours everywhere, instead of 16 with
-        voted normals at creases (voting is worse than wide PCA under noise).
     trim_to_noise : bool
         Evaluation: refit on the inliers within 2 σ (trims both sides of a
         face alike), instead of on the closer half until the fit is exact.
@@ -79,7 +79,6 @@ class NoisePolicy:
     """
 
     name: str
-    wide_normals: bool
     trim_to_noise: bool
     compete_above_noise: bool
     floor_selection: bool
@@ -98,8 +97,8 @@ class NoisePolicy:
         return self.name == "noisy"
 
 
-CLEAN = NoisePolicy("clean", *([False] * 13))
-NOISY = NoisePolicy("noisy", *([True] * 13))
+CLEAN = NoisePolicy("clean", *([False] * 12))
+NOISY = NoisePolicy("noisy", *([True] * 12))
 
 
 def choose(noise: str, sigma: float, spacing: float) -> NoisePolicy:
