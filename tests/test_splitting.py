@@ -12,7 +12,7 @@ from houghcad.families import select
 from houghcad.families.base import Primitive
 from houghcad.pipeline import Segmenter
 from houghcad.families import REGISTRY
-from houghcad.splitting import _still_free, clusters, on_one_line, splitting_phase
+from houghcad.splitting import _still_free, cluster_context, clusters, on_one_line, splitting_phase
 from houghcad.state import Candidate, Segmentation
 
 
@@ -111,3 +111,31 @@ def test_a_candidate_left_a_line_of_points_keeps_its_fit():
     (refit,) = _still_free([c], avail, ctx)
     assert refit.prim is not start
     assert abs(refit.prim.params["half_angle"] - alpha) < 1e-6
+
+
+def test_a_small_holes_crease_normals_are_read_again_from_its_own_points():
+    # Holes about 1.3 spacings wide: every wall point is a crease point whose
+    # voted normal is often the plate's. From the wall's own points alone PCA
+    # reads the wall's orientation.
+    cloud = synth.PARTS["bracket"](seed=0, n_points=8000)
+    ctx = context(cloud.points)
+    truth = ctx.pre.transform.dirs(cloud.normals)
+    truth /= np.linalg.norm(truth, axis=1, keepdims=True)
+    holes = [np.asarray(g) for g, p in zip(cloud.segments(), cloud.primitives) if p["name"].endswith("hole")]
+    before, after = [], []
+    for cl in holes:
+        own = cluster_context(cl, ctx)
+        assert own is not ctx and ctx.pre.normals is not own.pre.normals
+        for N, out in ((ctx.pre.normals, before), (own.pre.normals, after)):
+            out += np.degrees(np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", N[cl], truth[cl])), 0, 1))).tolist()
+        others = np.setdiff1d(np.arange(len(cloud.points)), cl)
+        np.testing.assert_array_equal(own.pre.normals[others], ctx.pre.normals[others])
+    assert np.median(after) < 0.5 * np.median(before)
+    assert np.median(after) < ctx.tol.scale.angle_deg
+
+
+def test_a_cluster_without_crease_points_keeps_the_context():
+    cloud = synth.PARTS["block_with_hole_and_slot"](seed=0, n_points=3000)
+    ctx = context(cloud.points)
+    flat = np.flatnonzero(~ctx.pre.crease) if ctx.pre.crease is not None else np.arange(len(cloud.points))
+    assert cluster_context(flat[:50], ctx) is ctx

@@ -14,11 +14,13 @@ from dataclasses import replace
 from typing import Callable
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .context import Context
 from .families import Family
 from .families.base import Primitive
 from .growth import absorb, accept
+from .normals import pca_normals
 from .preprocess import rotation_to_z
 from .ransac import ransac_pieces
 from .recognize import dbscan, dense_subsets, recognize, select
@@ -77,6 +79,8 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
             found = _still_free(got, avail, ctx)
             if not found:
                 found = coaxial_bands(cl, families, seg, lctx)
+            if not found and not got:
+                found = _still_free(own_normals_recognised(seen[k], families, lctx, free0), avail, ctx)
             if not found and not got and _ransac_sized(seen[k], ctx):
                 if ahead is None:
                     pieces = ransac_recognised(seen[k], families, lctx, free0)
@@ -134,6 +138,39 @@ def recognise_cluster(cl: np.ndarray, families: list[Family], ctx: Context,
     loop needs of a cluster that depends on its points alone."""
     found = recognize(cl, families, ctx, avail)
     return found, (ransac_recognised(cl, families, ctx, avail) if not found and _ransac_sized(cl, ctx) else None)
+
+
+def own_normals_recognised(cl: np.ndarray, families: list[Family], ctx: Context,
+                           avail: np.ndarray) -> list[Candidate]:
+    """The cluster's recognition with its crease points' normals read from the cluster's own
+    points (:func:`cluster_context`); nothing when none of them changes."""
+    own = cluster_context(cl, ctx)
+    return recognize(cl, families, own, avail) if own is not ctx else []
+
+
+def cluster_context(cl: np.ndarray, ctx: Context) -> Context:
+    """``ctx`` with the normals of the cluster's crease points (global indices ``cl``) estimated
+    again from the cluster's own points (extension).
+
+    A crease point's normal was voted among neighbours on both faces of its crease, and on a
+    small face (a hole a few spacings wide, a counterbore's step) it is often the large
+    neighbour's. Once the large faces hold their points, the cluster's points near a crease
+    point are the small face's own: PCA on the few nearest of them reads its orientation.
+    Neighbourhoods on one row of points (no plane through them) keep the voted normal."""
+    crease = ctx.pre.crease
+    if crease is None or len(cl) < ctx.tol.splitting.crease_neighbours:
+        return ctx
+    rows = np.flatnonzero(crease[cl])
+    if len(rows) == 0:
+        return ctx
+    k = ctx.tol.splitting.crease_neighbours
+    P = ctx.pre.points[cl]
+    _, nb = cKDTree(P).query(P[rows], k=k)
+    nrm, ev = pca_normals(P, nb.astype(np.int32))
+    flat = ev[:, 1] >= ctx.tol.splitting.crease_row_ratio * ev[:, 2]
+    N = ctx.pre.normals.copy()
+    N[cl[rows[flat]]] = nrm[flat]
+    return replace(ctx, pre=replace(ctx.pre, normals=N))
 
 
 def _ransac_sized(cl: np.ndarray, ctx: Context) -> bool:

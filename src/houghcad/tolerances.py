@@ -129,6 +129,10 @@ class SplittingTolerances:
     coaxial_band_taus: float = tol(2.0, "τ", "boundary points this close to the cylinder join its refit")
     coaxial_cover: float = tol(0.8, "share", "the cylinder must explain this much of the cluster")
     coaxial_refits: int = tol(2, "refits", "refits on the cluster and its boundary rows")
+    crease_neighbours: int = tol(6, "points", "a cluster's crease point takes the PCA normal of this many of the "
+                                 "cluster's points: on a hole a few spacings wide, more reach across it")
+    crease_row_ratio: float = tol(0.05, "eigenvalue ratio", "a neighbourhood whose middle spread is under this share "
+                                  "of the largest is one row of points, which no plane fits")
 
 
 @dataclass(frozen=True)
