@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
              f"- Median time with {a.jobs} jobs / with 1 job: **{ratio:.2f}** (target ≤ 0.65 at 2 jobs); "
              f"per cloud, the median of the ratios: {np.median(tn / t1):.2f}; total time "
              f"{tn.sum():.0f} s against {t1.sum():.0f} s.",
-             f"- Identical results (segments, parameters, labels, groups): {same} of {len(rows)} clouds."]
+             f"- Identical results (segments, parameters, labels, groups): {same} of {len(rows)} clouds"
+             + (f"; different: {', '.join(r['name'] for r in rows if not r['same'])}." if same < len(rows) else ".")]
     publish_section("jobs", "Both cores inside one cloud", "cloud_jobs.py", argv, [
         f"- Clouds: {len(rows)}, one at a time in one process; the `Segmenter.fit` call timed with "
         f"`n_jobs=1` and `n_jobs={a.jobs}` (families and clusters on forked workers).",
