@@ -105,6 +105,20 @@ def accumulate(grid: Grid, voter: np.ndarray, values: np.ndarray, weights: np.nd
     return H.reshape(grid.bins)
 
 
+@numba.njit(cache=True, inline="always")
+def _bin(v, lower, width, bins, wrap):
+    """The bin of value ``v`` along one axis of a grid (from ``lower``, ``width`` wide, ``bins``
+    of them, cyclic when ``wrap``), or -1 when it falls outside (NaN and inf included): the
+    one binning rule of :func:`_vote` and :func:`_line_vote`."""
+    x = np.floor((v - lower) / width)
+    if not (abs(x) < 2.0 ** 62):  # NaN, inf, or far outside
+        return np.int64(-1)
+    c = np.int64(x)
+    if wrap:
+        return c % bins
+    return c if 0 <= c < bins else np.int64(-1)
+
+
 # Voting by hand in numba rather than numpy's unique on (point, cell) keys: that sorted every
 # sample and held several (k, d) index arrays, the bulk of a round's time and memory on big clouds.
 @numba.njit(cache=True)
@@ -116,7 +130,6 @@ def _vote(voter, values, lower, width, bins, wrap, weights, order, H):
     ncell = H.size
     stamp = np.full(ncell, -1, np.int64)
     d = values.shape[1]
-    big = 2.0 ** 62
     last = -1
     for t in range(voter.size):
         i = order[t] if order.size else t
@@ -124,20 +137,12 @@ def _vote(voter, values, lower, width, bins, wrap, weights, order, H):
             return False
         last = voter[i]
         flat = 0
-        inside = True
         for j in range(d):
-            x = np.floor((values[i, j] - lower[j]) / width[j])
-            if not (abs(x) < big):  # NaN, inf, or far outside
-                inside = False
-                break
-            c = np.int64(x)
-            if wrap[j]:
-                c = c % bins[j]
-            elif c < 0 or c >= bins[j]:
-                inside = False
+            c = _bin(values[i, j], lower[j], width[j], bins[j], wrap[j])
+            if c < 0:
                 break
             flat = flat * bins[j] + c
-        if not inside:
+        if c < 0:
             continue
         # Voters are non-negative point indices, so the stamp's -1 is never a voter; a point's
         # samples are consecutive, so an older stamp means this point has not voted here.
@@ -433,22 +438,15 @@ def _line_vote(Q, M, s, lower, width, bins, H):
     cell): :func:`accumulate` on those samples, without holding them."""
     n, d = Q.shape
     stamp = np.full(H.size, -1, np.int64)
-    big = 2.0 ** 62
     for i in range(n):
         for k in range(s.size):
             flat = 0
-            inside = True
             for j in range(d):
-                x = np.floor(((Q[i, j] + s[k] * M[i, j]) - lower[j]) / width[j])
-                if not (abs(x) < big):  # NaN, inf, or far outside
-                    inside = False
-                    break
-                c = np.int64(x)
-                if c < 0 or c >= bins[j]:
-                    inside = False
+                c = _bin(Q[i, j] + s[k] * M[i, j], lower[j], width[j], bins[j], False)
+                if c < 0:
                     break
                 flat = flat * bins[j] + c
-            if inside and stamp[flat] != i:
+            if c >= 0 and stamp[flat] != i:
                 stamp[flat] = i
                 H[flat] += 1.0
 
