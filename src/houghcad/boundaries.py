@@ -45,11 +45,13 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     whoever was accepted first took them. To a narrow face (a fillet, a
     chamfer, a hole) those rows are a large share of its points, to a wide
     one a negligible share. A point moves only if it lies on the smaller
-    surface as closely as on its own, within τ: a small surface that crosses
-    a face at a shallow angle (a cylinder fitted across three narrow strips)
-    passes within ``delta`` of a wide band of the face's points, which lie
-    exactly on their own. ``delta``: distance to a surface that counts as
-    on it (standard units).
+    surface as closely as on its own, within ``settle_slack`` τ: a small
+    surface that crosses a face at a shallow angle (a cylinder fitted across
+    three narrow strips) passes within ``delta`` of a wide band of the face's
+    points, which lie exactly on their own, and so does a face that continues
+    another tangentially (a plane beyond a fillet), whose distance grows only
+    as the square of the distance from the tangent line. ``delta``: distance
+    to a surface that counts as on it (standard units).
     """
     if len(seg) < 2:
         return
@@ -76,7 +78,7 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
         cand = pairs[pairs[:, 0] == j, 1]
         s = seg[j]
         d = s.family.distance(s.prim, P[cand])
-        cand = cand[(d < delta) & (d <= own[cand] + ctx.tau)]
+        cand = cand[(d < delta) & (d <= own[cand] + ctx.tol.boundaries.settle_slack * ctx.tau)]
         cand = cand[sizes[j] < best_size[cand]]
         best[cand] = j
         best_size[cand] = sizes[j]

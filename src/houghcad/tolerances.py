@@ -140,6 +140,8 @@ class BoundaryTolerances:
     """Edge settling and dissolving (extensions, :mod:`houghcad.boundaries`)."""
 
     neighbours: int = tol(12, "neighbours", "points read around each point for adjacent segments")
+    settle_slack: float = tol(0.5, "τ", "a point on the smaller surface moves to it when no farther from it than from "
+                              "its own surface plus this")
     noisy_rounds: int = tol(8, "rounds", "each round moves the points next to the boundary; it walks to where the "
                             "surfaces cross")
     side_links: float = tol(3.0, "links", "a face's points this near the other face tell its side")
