@@ -5,7 +5,9 @@ put in each family's standard form and recognised again. A cluster where
 nothing is recognised is over-segmented with CGAL's Efficient RANSAC
 (:mod:`houghcad.ransac`), and each RANSAC piece goes through the Hough
 recognition: RANSAC only proposes regions, the vote decides type and
-parameters.
+parameters. A cluster recognised only in fragments (no piece a
+``fragment_share`` of it) is split by RANSAC too, and the split in larger
+pieces wins (our extension).
 """
 
 from __future__ import annotations
@@ -77,6 +79,18 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
             # points at the round's start all the same.
             got, pieces = ahead[k] if ahead is not None else (recognize(seen[k], families, lctx, free0), None)
             found = _still_free(got, avail, ctx)
+            # Extension: a cluster recognised only in fragments goes to the RANSAC fallback as
+            # well. The placements come from the cluster's normals, and where several surfaces
+            # share them (a wall end rounded by two fillets with a narrow flat between: their
+            # normal lines meet between the fillets' centres) they fit none: each candidate then
+            # keeps a slice. RANSAC's regions grow from minimal samples of one surface; the split
+            # that explains the cluster in larger pieces is taken.
+            if got and _fragmented(got, seen[k], ctx) and _ransac_sized(seen[k], ctx):
+                if ahead is None:
+                    pieces = ransac_recognised(seen[k], families, lctx, free0)
+                alt = _still_free(pieces or [], avail, ctx)
+                if _piece_score(alt) > _piece_score(found):
+                    found = alt
             if not found:
                 found = coaxial_bands(cl, families, seg, lctx)
             if not found and not got:
@@ -137,7 +151,19 @@ def recognise_cluster(cl: np.ndarray, families: list[Family], ctx: Context,
     large enough, its RANSAC regions' (None otherwise): what the splitting
     loop needs of a cluster that depends on its points alone."""
     found = recognize(cl, families, ctx, avail)
-    return found, (ransac_recognised(cl, families, ctx, avail) if not found and _ransac_sized(cl, ctx) else None)
+    again = (not found or _fragmented(found, cl, ctx)) and _ransac_sized(cl, ctx)
+    return found, (ransac_recognised(cl, families, ctx, avail) if again else None)
+
+
+def _fragmented(found: list[Candidate], cl: np.ndarray, ctx: Context) -> bool:
+    """Whether recognition explained the cluster ``cl`` only in pieces, each a small share of it."""
+    return max(len(c.indices) for c in found) < ctx.tol.splitting.fragment_share * len(cl)
+
+
+def _piece_score(found: list[Candidate]) -> float:
+    """How well candidates explain their points in few pieces: the sum of their squared sizes
+    (the same points in larger pieces score more)."""
+    return float(sum(len(c.indices) ** 2 for c in found))
 
 
 def own_normals_recognised(cl: np.ndarray, families: list[Family], ctx: Context,

@@ -120,6 +120,8 @@ class SplittingTolerances:
 
     max_rounds: int = tol(6, "rounds", "clustering rounds; each finds what the last freed")
     cluster_min_samples: int = tol(4, "points", "DBSCAN core size of a cluster")
+    fragment_share: float = tol(0.25, "share of the cluster", "a cluster whose largest recognised piece is smaller "
+                                "is also split by RANSAC; the larger pieces win")
     ransac_min_size: float = tol(3.0, "min_points", "clusters this large where the vote finds nothing are "
                                  "over-segmented with RANSAC")
     ransac_min_points: int = tol(10, "points", "RANSAC's smallest shape")

@@ -321,6 +321,52 @@ def filleted_block(
     return _part(st, f"filleted_block-{seed}", faces, solid, n_points, noise, outliers, pose, scale)
 
 
+def rounded_tube(
+    seed: int = 0,
+    n_points: int = 5000,
+    noise: float = 0.0,
+    pose: bool = True,
+    *,
+    outliers: float = 0.0,
+    scale: float | None = None,
+) -> SynthCloud:
+    """Thick-walled tube whose top end is rounded on both edges, a narrow flat between them.
+
+    Part frame: wall Ri < ρ < Ro about the z axis, 0 ≤ z ≤ H. The outer and inner top edges are
+    rounded by quarter tori of one minor radius, which take most of the wall's thickness: the
+    flat annulus left on top is a fifth of it. Its normal lines, like those of a single tube
+    round the whole wall end, meet between the two fillets' centres.
+
+    Primitives (6): 0 outer cylinder, 1 inner cylinder, 2 bottom annulus, 3 top flat annulus,
+    4 outer fillet torus (outer-upper quarter of its tube), 5 inner fillet torus (inner-upper
+    quarter).
+    """
+    st = _Streams.from_seed(seed, "rounded_tube")
+    g = st.shape
+    Ro, Ri, H = g.uniform(9.0, 10.0), g.uniform(3.0, 3.5), g.uniform(15.0, 20.0)
+    rf = (Ro - Ri) * g.uniform(0.38, 0.42)
+    zc = H - rf  # the fillets' tube centres
+
+    def solid(p: Array) -> Array:
+        rho, z = _radial(p), p[:, 2]
+        top = z > zc
+        outer_cut = top & (rho > Ro - rf) & (np.hypot(rho - (Ro - rf), z - zc) > rf)
+        inner_cut = top & (rho < Ri + rf) & (np.hypot(rho - (Ri + rf), z - zc) > rf)
+        return (rho > Ri) & (rho < Ro) & (z > 0) & (z < H) & ~outer_cut & ~inner_cut
+
+    faces = [
+        _cyl_face("outer wall", (0, 0, H / 2), Ro, H),
+        _cyl_face("inner wall", (0, 0, H / 2), Ri, H),
+        _disc_face("bottom", (0, 0, 0), Ro, (0, 0, -1)),
+        _disc_face("top flat", (0, 0, H), Ro),
+        _Face("outer fillet", "torus", {"major": float(Ro - rf), "minor": float(rf), "v_range": (0.0, np.pi / 2)},
+              np.eye(3), np.array([0.0, 0.0, zc])),
+        _Face("inner fillet", "torus", {"major": float(Ri + rf), "minor": float(rf), "v_range": (np.pi / 2, np.pi)},
+              np.eye(3), np.array([0.0, 0.0, zc])),
+    ]
+    return _part(st, f"rounded_tube-{seed}", faces, solid, n_points, noise, outliers, pose, scale)
+
+
 #: Part name → generator function (each takes ``seed=`` and returns a :class:`SynthCloud`).
 PARTS: dict[str, Callable[..., SynthCloud]] = {
     "block_with_hole_and_slot": block_with_hole_and_slot,
@@ -329,6 +375,7 @@ PARTS: dict[str, Callable[..., SynthCloud]] = {
     "mirrored_cones": mirrored_cones,
     "gear_like": gear_like,
     "filleted_block": filleted_block,
+    "rounded_tube": rounded_tube,
     **COMPLEX_PARTS,
     **SMALL_FACE_PARTS,
     **PAPER_PARTS,
