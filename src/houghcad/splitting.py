@@ -85,20 +85,16 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
             # normal lines meet between the fillets' centres) they fit none: each candidate then
             # keeps a slice. RANSAC's regions grow from minimal samples of one surface; the split
             # that explains the cluster in larger pieces is taken.
-            if got and _fragmented(got, seen[k], ctx) and _ransac_sized(seen[k], ctx):
-                if ahead is None:
-                    pieces = ransac_recognised(seen[k], families, lctx, free0)
-                alt = _still_free(pieces or [], avail, ctx)
+            if got and _wants_ransac(got, seen[k], ctx):
+                alt = _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0), avail, ctx)
                 if _piece_score(alt) > _piece_score(found):
                     found = alt
             if not found:
                 found = coaxial_bands(cl, families, seg, lctx)
             if not found and not got:
                 found = _still_free(own_normals_recognised(seen[k], families, lctx, free0), avail, ctx)
-            if not found and not got and _ransac_sized(seen[k], ctx):
-                if ahead is None:
-                    pieces = ransac_recognised(seen[k], families, lctx, free0)
-                found = _still_free(pieces or [], avail, ctx)
+            if not found and not got and _wants_ransac(got, seen[k], ctx):
+                found = _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0), avail, ctx)
             accept(found, seg, ctx)
             found_any |= bool(found)
             if found:
@@ -147,17 +143,27 @@ def ransac_recognised(cl: np.ndarray, families: list[Family], ctx: Context,
 
 def recognise_cluster(cl: np.ndarray, families: list[Family], ctx: Context,
                       avail: np.ndarray) -> tuple[list[Candidate], list[Candidate] | None]:
-    """A cluster's recognition, and, when that finds nothing on a cluster
-    large enough, its RANSAC regions' (None otherwise): what the splitting
-    loop needs of a cluster that depends on its points alone."""
+    """A cluster's recognition, and, when :func:`_wants_ransac` sends the
+    cluster to the fallback, its RANSAC regions' (None otherwise): what the
+    splitting loop needs of a cluster that depends on its points alone."""
     found = recognize(cl, families, ctx, avail)
-    again = (not found or _fragmented(found, cl, ctx)) and _ransac_sized(cl, ctx)
-    return found, (ransac_recognised(cl, families, ctx, avail) if again else None)
+    return found, (ransac_recognised(cl, families, ctx, avail) if _wants_ransac(found, cl, ctx) else None)
 
 
-def _fragmented(found: list[Candidate], cl: np.ndarray, ctx: Context) -> bool:
-    """Whether recognition explained the cluster ``cl`` only in pieces, each a small share of it."""
-    return max(len(c.indices) for c in found) < ctx.tol.splitting.fragment_share * len(cl)
+def _wants_ransac(found: list[Candidate], cl: np.ndarray, ctx: Context) -> bool:
+    """Whether the cluster ``cl``, whose recognition gave ``found``, goes to the RANSAC fallback:
+    it is large enough, and recognition found nothing or only pieces each a small share of it
+    (the one rule of the splitting loop and of :func:`recognise_cluster` on the workers)."""
+    t = ctx.tol.splitting
+    fragmented = not found or max(len(c.indices) for c in found) < t.fragment_share * len(cl)
+    return fragmented and len(cl) >= t.ransac_min_size * ctx.min_points
+
+
+def _ransac_pieces(pieces: list[Candidate] | None, cl: np.ndarray, families: list[Family], ctx: Context,
+                   avail: np.ndarray) -> list[Candidate]:
+    """RANSAC's regions of the cluster ``cl`` as recognised: ``pieces`` when the workers computed
+    them ahead (under :func:`_wants_ransac`, as here), else computed now."""
+    return pieces if pieces is not None else ransac_recognised(cl, families, ctx, avail)
 
 
 def _piece_score(found: list[Candidate]) -> float:
@@ -197,12 +203,6 @@ def cluster_context(cl: np.ndarray, ctx: Context) -> Context:
     N = ctx.pre.normals.copy()
     N[cl[rows[flat]]] = nrm[flat]
     return replace(ctx, pre=replace(ctx.pre, normals=N))
-
-
-def _ransac_sized(cl: np.ndarray, ctx: Context) -> bool:
-    """Whether a cluster where recognition found nothing is large enough for the RANSAC fallback
-    (the splitting loop and the workers must agree on it)."""
-    return len(cl) >= ctx.tol.splitting.ransac_min_size * ctx.min_points
 
 
 def _recognised_ahead(seen: list[np.ndarray], families: list[Family], ctx: Context, free: np.ndarray) \
