@@ -68,7 +68,7 @@ NOT_ON_FIT4CAD_FIELDS = {
 
 #: Special cases inside the passes, switched off by a tolerance that can no longer be met.
 SPECIAL_CASES: tuple[tuple[str, dict[str, float], bool], ...] = (
-    ("coaxial_bands", {"splitting.coaxial_cover": 1.01}, True),   # cylinders about the neighbours' axes
+    ("aligned_features", {"splitting.aligned_cover": 1.01}, True),   # cylinders and planes aligned with the neighbours
     ("ransac_fallback", {"splitting.ransac_min_size": 1e9}, True),  # CGAL's RANSAC on unplaced clusters
     ("strip_rows", {"recognition.strip_min_points": 10 ** 9}, True),  # one-row strips of narrow faces
     ("slice_gate", {"recognition.slice_sigmas": 1e9, "recognition.slice_taus": 1e9}, True),  # tangent slices

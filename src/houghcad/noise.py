@@ -76,6 +76,13 @@ class NoisePolicy:
         tube); noisy normals place that meeting point at random, and a grid
         stretched to it coarsens every torus vote (ablation: a noisy shaft
         with a groove lost 0.07 DSC on one seed).
+    one_aligned_cylinder : bool
+        A cluster the normals could not place gets one cylinder about a
+        neighbour's axis, fitted to all its points (:mod:`houghcad.aligned`),
+        not features in turn drawn from circles through three points and
+        levels: a band ±τ (3 σ) holds most of a small noisy cluster whatever
+        its shape, so the best of many draws is a chance fit (a generalised
+        cone's pieces came out as planes and cylinders of a dozen points).
     """
 
     name: str
@@ -91,14 +98,15 @@ class NoisePolicy:
     revote_creases: bool
     nearest_edges: bool
     torus_grid_from_points: bool
+    one_aligned_cylinder: bool
 
     @property
     def noisy(self) -> bool:
         return self.name == "noisy"
 
 
-CLEAN = NoisePolicy("clean", *([False] * 12))
-NOISY = NoisePolicy("noisy", *([True] * 12))
+CLEAN = NoisePolicy("clean", *([False] * 13))
+NOISY = NoisePolicy("noisy", *([True] * 13))
 
 
 def choose(noise: str, sigma: float, spacing: float) -> NoisePolicy:

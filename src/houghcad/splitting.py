@@ -12,21 +12,20 @@ pieces wins (our extension).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
-from typing import Callable
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .aligned import aligned_features
 from .context import Context
 from .families import Family
-from .families.base import Primitive
 from .growth import absorb, accept
 from .normals import pca_normals
-from .preprocess import rotation_to_z
 from .ransac import ransac_pieces
-from .recognize import dbscan, dense_subsets, recognize, select
-from .state import Candidate, Segmentation, mean_fitting_error
+from .recognize import dbscan, recognize
+from .state import Candidate, Segmentation
 
 
 def clusters(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
@@ -90,7 +89,7 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
                 if _piece_score(alt) > _piece_score(found):
                     found = alt
             if not found:
-                found = coaxial_bands(cl, families, seg, lctx)
+                found = aligned_features(cl, families, seg, lctx)
             if not found and not got:
                 found = _still_free(own_normals_recognised(seen[k], families, lctx, free0), avail, ctx)
             if not found and not got and _wants_ransac(got, seen[k], ctx):
@@ -221,87 +220,6 @@ def _recognised_ahead(seen: list[np.ndarray], families: list[Family], ctx: Conte
         return None
     it = iter(got)
     return [next(it) if len(s) >= ctx.min_points else ([], None) for s in seen]
-
-
-def coaxial_bands(cl: np.ndarray, families: list[Family], seg: Segmentation, ctx: Context) -> list[Candidate]:
-    """Cylinders about the axes of the adjacent segments, for a cluster the
-    normals could not place.
-
-    A small hole or a band a few rows high between two faces has no point
-    whose neighbourhood lies on it alone: its PCA normals are blends and
-    neither the axis estimate nor the vote finds it, while its boundary rows,
-    which lie on it too, went to the faces around it. On CAD parts such a
-    feature is mostly coaxial with, or perpendicular to, a neighbour: take
-    those directions as axes, the circle through the cluster's projection as
-    the placement, and refit on the cluster and the adjacent boundary points
-    that lie on the cylinder (one free row alone does not fix a tilt).
-    """
-    cyl = next((f for f in families if f.name == "cylinder"), None)
-    if cyl is None or not len(seg) or len(cl) < ctx.min_points:
-        return []
-    t = ctx.tol.splitting
-    P = ctx.pre.points
-    axes, border = _adjacent_axes(cl, seg, ctx)
-    out = []
-    ext = np.concatenate([cl, border])
-    for a in axes:
-        prim = _circle_about(a, P[cl], ctx)
-        if prim is None:
-            continue
-        for _ in range(t.coaxial_refits):
-            on = ext[cyl.distance(prim, P[ext]) < t.coaxial_band_taus * ctx.tau]
-            if np.isin(cl, on).mean() < t.coaxial_cover:
-                break
-            new = cyl.fit(prim, P[on], ctx.pre.normals[on])
-            if new is None or not cyl.valid(new, ctx):
-                break
-            prim = new
-        else:
-            d = cyl.distance(prim, P[cl])
-            ok = d < ctx.tau
-            if ok.mean() < t.coaxial_cover:
-                continue
-            sel = cl[ok]
-            for comp in dense_subsets(P[sel], ctx.link, ctx.min_points, ctx.tol.recognition.dense_min_samples):
-                out.append(Candidate(cyl, prim, sel[comp], mean_fitting_error(d[ok][comp], P[sel[comp]]),
-                                     d[ok][comp]))
-    return select(out, seg.free, ctx)
-
-
-def _adjacent_axes(cl: np.ndarray, seg: Segmentation, ctx: Context) -> tuple[list[np.ndarray], np.ndarray]:
-    """The distinct axes or normals (unit (3,)) of the segments adjacent to the
-    cluster ``cl``, and their points bordering it (global indices)."""
-    t = ctx.tol.splitting
-    P = ctx.pre.points
-    owner = seg.labels
-    dist, nb = ctx.pre.tree.query(P[cl], k=min(t.coaxial_neighbours, len(P)), distance_upper_bound=ctx.link)
-    nb = nb[np.isfinite(dist)]
-    adj = np.unique(owner[nb])
-    adj = adj[adj >= 0]
-    border = np.unique(nb[owner[nb] >= 0])
-    axes: list[np.ndarray] = []
-    for j in adj.tolist():
-        fr = seg.records[j].family.frame(seg.records[j].prim)
-        if fr is None or fr.direction is None:
-            continue
-        a = np.asarray(fr.direction, float)
-        if all(abs(a @ b) < np.cos(np.radians(t.coaxial_axis_deg)) for b in axes):
-            axes.append(a)
-    return axes, border
-
-
-def _circle_about(a: np.ndarray, X: np.ndarray, ctx: Context) -> Primitive | None:
-    """The cylinder of axis ``a`` (unit (3,)) through the circle fitted to the
-    points X (m, 3) projected across it (Kasa's algebraic fit), or None."""
-    R = rotation_to_z(a)
-    Q = (X @ R.T)[:, :2]
-    A = np.c_[2 * Q, np.ones(len(Q))]
-    sol = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0]
-    r2 = sol[2] + sol[:2] @ sol[:2]
-    if not 0 < r2 < ctx.max_radius**2:
-        return None
-    return Primitive("cylinder", {"axis_point": R.T @ np.array([sol[0], sol[1], 0.0]), "axis": a,
-                                  "radius": float(np.sqrt(r2))})
 
 
 def on_one_line(P: np.ndarray) -> bool:

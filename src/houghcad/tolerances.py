@@ -126,11 +126,18 @@ class SplittingTolerances:
                                  "over-segmented with RANSAC")
     ransac_min_points: int = tol(10, "points", "RANSAC's smallest shape")
     ransac_probability: float = tol(0.01, "probability", "RANSAC's chance of missing the largest shape")
-    coaxial_neighbours: int = tol(12, "neighbours", "points around a cluster read for its adjacent segments")
-    coaxial_axis_deg: float = tol(2.0, "degrees", "adjacent axes closer than this are one")
-    coaxial_band_taus: float = tol(2.0, "τ", "boundary points this close to the cylinder join its refit")
-    coaxial_cover: float = tol(0.8, "share", "the cylinder must explain this much of the cluster")
-    coaxial_refits: int = tol(2, "refits", "refits on the cluster and its boundary rows")
+    aligned_neighbours: int = tol(12, "neighbours", "points around a cluster read for its adjacent segments")
+    aligned_axis_deg: float = tol(2.0, "degrees", "adjacent axes closer than this are one")
+    aligned_samples: int = tol(256, "circles", "circles through three points drawn per direction: a feature with a "
+                               "third of a cluster's points is drawn about ten times")
+    aligned_band_taus: float = tol(2.0, "τ", "boundary points this close to a cylinder join its refit")
+    aligned_refits: int = tol(2, "refits", "refits of a cylinder on its points and the boundary rows")
+    aligned_pieces: int = tol(4, "features", "features aligned with the neighbours taken per cluster: a counterbore "
+                              "is three (bore, step, hole); a surface the normals missed, sliced into rings, is many")
+    aligned_normal_deg: float = tol(60.0, "degrees", "most of a level's points have normals this close to its "
+                                    "normal: a small planar face's blended normals lean up to about 30° towards its "
+                                    "neighbours, rows of a coaxial surface at one level stand at about 90°")
+    aligned_cover: float = tol(0.8, "share", "the aligned features must explain this much of the cluster together")
     crease_neighbours: int = tol(6, "points", "a cluster's crease point takes the PCA normal of this many of the "
                                  "cluster's points: on a hole a few spacings wide, more reach across it")
     crease_row_ratio: float = tol(0.05, "eigenvalue ratio", "a neighbourhood whose middle spread is under this share "
@@ -151,6 +158,8 @@ class BoundaryTolerances:
     sound_fit: float = tol(1.5, "ratio to the median fit", "a primitive fitting worse than this is wrong, and keeps "
                            "the nearest-surface rule")
     dissolve_size: float = tol(3.0, "min_points", "segments smaller than this may be slivers")
+    dissolve_tie: float = tol(0.01, "τ", "a neighbour fitting a sliver's points within this of its own fit explains "
+                              "them as well: two fits of one exact surface differ by rounding")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,217 @@
+"""Features aligned with their neighbours (our extension of the splitting phase, paper §5.3).
+
+A small hole, a counterbore's bore and step, a band a few rows high between two faces: no point's
+neighbourhood lies on such a face alone, so its PCA normals are blends of the faces around it, and
+neither the axis estimate nor the vote places it. On CAD parts such features are mostly coaxial
+with, or perpendicular to, a neighbour. With a neighbour's axis or normal as the direction, what
+is left of the standard form is found from the points alone, no normals needed: cylinders about
+the direction are circles in the plane across it, planes across it are levels along it. The
+features of a cluster are taken in turn, each the largest one left.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .context import Context
+from .families import Family
+from .families.base import Primitive
+from .preprocess import rotation_to_z
+from .recognize import dense_subsets, select
+from .state import Candidate, Segmentation, mean_fitting_error
+
+
+def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, ctx: Context) -> list[Candidate]:
+    """Cylinders coaxial with, and planes across, the axes and normals of the segments adjacent
+    to the cluster ``cl`` (global indices), for a cluster the normals could not place.
+
+    Features are taken in turn, each the largest aligned circle or level among the points the
+    ones before it left (at most ``aligned_pieces``); their pieces are dense subsets of at least
+    ``ctx.min_points`` and together hold ``aligned_cover`` of the cluster."""
+    fams = {f.name: f for f in families}
+    cyl, plane = fams.get("cylinder"), fams.get("plane")
+    if (cyl is None and plane is None) or not len(seg) or len(cl) < ctx.min_points:
+        return []
+    t = ctx.tol.splitting
+    P = ctx.pre.points
+    adj, border = _adjacent(cl, seg, ctx)
+    axes = _distinct_axes(adj, seg, ctx)
+    out: list[Candidate] = []
+    # Seeded by the cluster, so that a cluster gets the same answer in any order.
+    rng = np.random.default_rng([ctx.seed, int(cl[0])])
+    rest = cl
+    for _ in range(1 if ctx.policy.one_aligned_cylinder else t.aligned_pieces):
+        if len(rest) < ctx.min_points:
+            break
+        best = _largest_feature(P[rest], ctx.pre.normals[rest], axes, cyl, plane, rng, ctx)
+        if best is None:
+            break
+        fam, prim, on = best
+        if fam is cyl:
+            prim, on = _refined(cyl, prim, on, rest, border, ctx)
+        got = _pieces(fam, prim, rest[on], ctx)
+        if not got:
+            break
+        out += got
+        rest = rest[~on]
+    if not out or sum(len(c.indices) for c in out) < t.aligned_cover * len(cl):
+        return []
+    return select(out, seg.free, ctx)
+
+
+def _pieces(fam: Family, prim: Primitive, sel: np.ndarray, ctx: Context) -> list[Candidate]:
+    """Candidates of ``prim`` on the dense subsets (at least ``ctx.min_points``) of the points
+    ``sel`` (global indices)."""
+    P = ctx.pre.points[sel]
+    d = fam.distance(prim, P)
+    return [Candidate(fam, prim, sel[c], mean_fitting_error(d[c], P[c]), d[c])
+            for c in dense_subsets(P, ctx.link, ctx.min_points, ctx.tol.recognition.dense_min_samples)]
+
+
+def _largest_feature(X: np.ndarray, N: np.ndarray, axes: list[np.ndarray], cyl: Family | None,
+                     plane: Family | None, rng: np.random.Generator, ctx: Context) \
+        -> tuple[Family, Primitive, np.ndarray] | None:
+    """The aligned cylinder or plane with the most of the points X (m, 3) (normals N (m, 3))
+    within τ, as ``(family, primitive, inlier mask (m,))``, or None when none holds
+    ``ctx.min_points``. A level wins a tie: a plane is the simpler surface."""
+    found = []
+    for a in axes:
+        R = rotation_to_z(a)
+        Q = X @ R.T
+        noisy = ctx.policy.one_aligned_cylinder
+        if plane is not None and not noisy:
+            level, on = _best_level(Q[:, 2], ctx.tau)
+            found.append((plane, Primitive("plane", {"normal": a.copy(), "offset": float(level)}), on))
+        circle = None if cyl is None else _circle_of_all(Q[:, :2], ctx) if noisy else _best_circle(Q[:, :2], rng, ctx)
+        if circle is not None:
+            c, r, on = circle
+            # The axis point at the foot of the points' centroid, as the family's fit keeps it.
+            foot = np.array([c[0], c[1], Q[on, 2].mean()])
+            found.append((cyl, Primitive("cylinder", {"axis_point": R.T @ foot, "axis": a.copy(), "radius": r}), on))
+    cos = np.cos(np.radians(ctx.tol.splitting.aligned_normal_deg))
+    best, count = None, ctx.min_points - 1
+    for fam, prim, on in found:
+        if on.sum() <= count:
+            continue
+        # Rows of other surfaces line up at one level (the rings of a coaxial cylinder sampled
+        # in rings, scan lines): their normals stand across the level, while a small planar
+        # face's blended normals lean only part way towards the faces around it. (A small
+        # hole's normals are blends of its whole neighbourhood, often past 60°: circles are
+        # not held to this.)
+        if fam is cyl or np.median(np.abs(N[on] @ prim.params["normal"])) >= cos:
+            best, count = (fam, prim, on), on.sum()
+    return best
+
+
+def _best_level(h: np.ndarray, tau: float) -> tuple[float, np.ndarray]:
+    """The level along the direction with the most heights h (m,) within τ, refined to their
+    mean, and the mask (m,) of the heights within τ of it."""
+    s = np.sort(h)
+    count = np.searchsorted(s, s + tau, side="right") - np.searchsorted(s, s - tau, side="left")
+    i = int(np.argmax(count))
+    on = np.abs(h - s[i]) <= tau
+    level = float(h[on].mean())
+    return level, np.abs(h - level) <= tau
+
+
+def _best_circle(Q: np.ndarray, rng: np.random.Generator, ctx: Context) \
+        -> tuple[np.ndarray, float, np.ndarray] | None:
+    """The circle through the most of the points Q (m, 2) within τ, from circles through three
+    of them drawn at random (``aligned_samples``), refitted on its points: ``(centre (2,),
+    radius, mask (m,))``, or None. Written here because the direction is given: a 2-D circle
+    RANSAC over a few hundred points needs no library's 3-D machinery."""
+    m = len(Q)
+    if m < 3:
+        return None
+    tri = rng.integers(0, m, size=(ctx.tol.splitting.aligned_samples, 3))
+    c, r = _circumcircles(Q[tri[:, 0]], Q[tri[:, 1]], Q[tri[:, 2]])
+    ok = np.isfinite(r) & (r > 0) & (r < ctx.max_radius)
+    if not ok.any():
+        return None
+    c, r = c[ok], r[ok]
+    d = np.abs(np.linalg.norm(Q[None, :, :] - c[:, None, :], axis=2) - r[:, None])
+    k = int(np.argmax((d <= ctx.tau).sum(axis=1)))
+    on = d[k] <= ctx.tau
+    fit = _kasa(Q[on])
+    if fit is not None and fit[1] < ctx.max_radius:
+        on2 = np.abs(np.linalg.norm(Q - fit[0], axis=1) - fit[1]) <= ctx.tau
+        if on2.sum() >= on.sum():
+            return fit[0], fit[1], on2
+    return c[k], float(r[k]), on
+
+
+def _circle_of_all(Q: np.ndarray, ctx: Context) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """The least-squares circle of all the points Q (m, 2) and the mask (m,) of those within τ,
+    or None."""
+    fit = _kasa(Q)
+    if fit is None or fit[1] >= ctx.max_radius:
+        return None
+    return fit[0], fit[1], np.abs(np.linalg.norm(Q - fit[0], axis=1) - fit[1]) <= ctx.tau
+
+
+def _circumcircles(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (k, 2) and radii (k,) of the circles through the points A, B, C (k, 2) each;
+    radius inf where the three lie on a line."""
+    b, c = B - A, C - A
+    den = 2 * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])
+    bb, cc = (b**2).sum(1), (c**2).sum(1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.stack([(c[:, 1] * bb - b[:, 1] * cc) / den, (b[:, 0] * cc - c[:, 0] * bb) / den], axis=1)
+    r = np.where(den != 0, np.linalg.norm(u, axis=1), np.inf)
+    return A + np.nan_to_num(u), r
+
+
+def _kasa(Q: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """The least-squares circle (Kasa's algebraic fit) of the points Q (m, 2): centre, radius."""
+    if len(Q) < 3:
+        return None
+    A = np.c_[2 * Q, np.ones(len(Q))]
+    sol = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0]
+    r2 = sol[2] + sol[:2] @ sol[:2]
+    return (sol[:2], float(np.sqrt(r2))) if r2 > 0 else None
+
+
+def _adjacent(cl: np.ndarray, seg: Segmentation, ctx: Context) -> tuple[list[int], np.ndarray]:
+    """The segments with a point within ``ctx.link`` of the cluster ``cl``, and those points
+    (global indices)."""
+    P = ctx.pre.points
+    dist, nb = ctx.pre.tree.query(P[cl], k=min(ctx.tol.splitting.aligned_neighbours, len(P)),
+                                  distance_upper_bound=ctx.link)
+    nb = np.unique(nb[np.isfinite(dist)])
+    border = nb[seg.labels[nb] >= 0]
+    return np.unique(seg.labels[border]).tolist(), border
+
+
+def _refined(cyl: Family, prim: Primitive, on: np.ndarray, rest: np.ndarray, border: np.ndarray,
+             ctx: Context) -> tuple[Primitive, np.ndarray]:
+    """The cylinder ``prim`` refitted, axis free, on the points left (``rest``) and the adjacent
+    segments' boundary points within ``aligned_band_taus`` × τ of it (``aligned_refits``
+    times), with its mask (τ) over ``rest``; the fit as given when the refit holds fewer of them.
+    A hole's boundary rows went to the faces around it, and under noise its free rows alone
+    fix neither its radius nor a tilt."""
+    t = ctx.tol.splitting
+    P, N = ctx.pre.points, ctx.pre.normals
+    ext = np.concatenate([rest, border])
+    new = prim
+    for _ in range(t.aligned_refits):
+        band = ext[cyl.distance(new, P[ext]) < t.aligned_band_taus * ctx.tau]
+        fit = cyl.fit(new, P[band], N[band]) if len(band) >= ctx.min_points else None
+        if fit is None or not cyl.valid(fit, ctx):
+            break
+        new = fit
+    on2 = cyl.distance(new, P[rest]) < ctx.tau
+    return (new, on2) if new is not prim and on2.sum() >= on.sum() else (prim, on)
+
+
+def _distinct_axes(adj: list[int], seg: Segmentation, ctx: Context) -> list[np.ndarray]:
+    """The distinct axes or normals (unit (3,)) of the segments ``adj``."""
+    axes: list[np.ndarray] = []
+    for j in adj:
+        fr = seg.records[j].family.frame(seg.records[j].prim)
+        if fr is None or fr.direction is None:
+            continue
+        a = np.asarray(fr.direction, float)
+        a = a / np.linalg.norm(a)
+        if all(abs(a @ b) < np.cos(np.radians(ctx.tol.splitting.aligned_axis_deg)) for b in axes):
+            axes.append(a)
+    return axes
