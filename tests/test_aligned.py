@@ -3,6 +3,8 @@ across a neighbour's axis or normal, found from the points alone."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 import houghcad
@@ -56,8 +58,9 @@ def test_rows_of_coaxial_cylinders_at_one_level_are_no_plane():
     X = np.concatenate([A, B])
     N = np.c_[X[:, :2] - np.r_[np.zeros((14, 2)), np.tile([8 * s, 0.0], (10, 1))], np.zeros(len(X))]
     N /= np.linalg.norm(N, axis=1, keepdims=True)
-    fam, prim, on = _largest_feature(X, N, [np.array([0.0, 0.0, 1.0])], REGISTRY["cylinder"],
-                                     REGISTRY["plane"], rng, ctx)
+    ctx = replace(ctx, pre=replace(ctx.pre, points=X, normals=N))
+    fam, prim, on = _largest_feature(np.arange(len(X)), np.zeros(0, int), [np.array([0.0, 0.0, 1.0])],
+                                     REGISTRY["cylinder"], REGISTRY["plane"], rng, ctx)
     assert fam.name == "cylinder" and np.isclose(prim.params["radius"], 3 * s)
     assert on[:14].all() and not on[14:].any()
 

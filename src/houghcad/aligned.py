@@ -33,7 +33,6 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
     if (cyl is None and plane is None) or not len(seg) or len(cl) < ctx.min_points:
         return []
     t = ctx.tol.splitting
-    P = ctx.pre.points
     adj, border = _adjacent(cl, seg, ctx)
     axes = _distinct_axes(adj, seg, ctx)
     out: list[Candidate] = []
@@ -43,12 +42,10 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
     for _ in range(1 if ctx.policy.one_aligned_cylinder else t.aligned_pieces):
         if len(rest) < ctx.min_points:
             break
-        best = _largest_feature(P[rest], ctx.pre.normals[rest], axes, cyl, plane, rng, ctx)
+        best = _largest_feature(rest, border, axes, cyl, plane, rng, ctx)
         if best is None:
             break
         fam, prim, on = best
-        if fam is cyl:
-            prim, on = _refined(cyl, prim, on, rest, border, ctx)
         got = _pieces(fam, prim, rest[on], ctx)
         if not got:
             break
@@ -68,17 +65,19 @@ def _pieces(fam: Family, prim: Primitive, sel: np.ndarray, ctx: Context) -> list
             for c in dense_subsets(P, ctx.link, ctx.min_points, ctx.tol.recognition.dense_min_samples)]
 
 
-def _largest_feature(X: np.ndarray, N: np.ndarray, axes: list[np.ndarray], cyl: Family | None,
+def _largest_feature(rest: np.ndarray, border: np.ndarray, axes: list[np.ndarray], cyl: Family | None,
                      plane: Family | None, rng: np.random.Generator, ctx: Context) \
         -> tuple[Family, Primitive, np.ndarray] | None:
-    """The aligned cylinder or plane with the most of the points X (m, 3) (normals N (m, 3))
+    """The aligned cylinder or plane with the most of the points ``rest`` (global indices)
     within τ, as ``(family, primitive, inlier mask (m,))``, or None when none holds
-    ``ctx.min_points``. A level wins a tie: a plane is the simpler surface."""
+    ``ctx.min_points``; cylinders refitted with the boundary points ``border``
+    (:func:`_refined`). A level wins a tie: a plane is the simpler surface."""
+    X, N = ctx.pre.points[rest], ctx.pre.normals[rest]
+    noisy = ctx.policy.one_aligned_cylinder
     found = []
     for a in axes:
         R = rotation_to_z(a)
         Q = X @ R.T
-        noisy = ctx.policy.one_aligned_cylinder
         if plane is not None and not noisy:
             level, on = _best_level(Q[:, 2], ctx.tau)
             found.append((plane, Primitive("plane", {"normal": a.copy(), "offset": float(level)}), on))
@@ -86,8 +85,9 @@ def _largest_feature(X: np.ndarray, N: np.ndarray, axes: list[np.ndarray], cyl: 
         if circle is not None:
             c, r, on = circle
             # The axis point at the foot of the points' centroid, as the family's fit keeps it.
-            foot = np.array([c[0], c[1], Q[on, 2].mean()])
-            found.append((cyl, Primitive("cylinder", {"axis_point": R.T @ foot, "axis": a.copy(), "radius": r}), on))
+            foot = np.array([c[0], c[1], Q[on if on.any() else slice(None), 2].mean()])
+            prim = Primitive("cylinder", {"axis_point": R.T @ foot, "axis": a.copy(), "radius": r})
+            found.append((cyl, *_refined(cyl, prim, on, rest, border, ctx)))
     cos = np.cos(np.radians(ctx.tol.splitting.aligned_normal_deg))
     best, count = None, ctx.min_points - 1
     for fam, prim, on in found:
