@@ -3,16 +3,13 @@ across a neighbour's axis or normal, found from the points alone."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 import houghcad
 from _helpers import context
 from houghcad import synth
-from houghcad.aligned import _best_circle, _best_level, _circumcircles, _largest_feature
+from houghcad.aligned import _best_circle, _best_level, _circumcircles
 from houghcad.evaluate import classification_measures
-from houghcad.families import REGISTRY
 
 
 def _ring(n: int, r: float, z: float, rng: np.random.Generator, centre=(0.0, 0.0)) -> np.ndarray:
@@ -46,23 +43,6 @@ def test_a_ring_and_a_level_are_found_among_a_counterbores_points():
     c, r, on = _best_circle(X[:, :2], rng, ctx)
     assert np.isclose(r, 2.3 * s, rtol=1e-6) and np.allclose(c, 0.0, atol=1e-6 * s)
     assert on.sum() == len(bore)
-
-
-def test_rows_of_coaxial_cylinders_at_one_level_are_no_plane():
-    # Cylinders sampled in rings: two of them hold a ring each at one height. The points lie on
-    # one level, but their normals stand across it; the circle through one ring is the feature.
-    ctx = context(synth.plate_with_holes(seed=0, n_points=3000).points)
-    rng = np.random.default_rng(1)
-    s = 4 * ctx.spacing
-    A, B = _ring(14, 3 * s, 0.0, rng), _ring(10, 3 * s, 0.0, rng, centre=(8 * s, 0.0))
-    X = np.concatenate([A, B])
-    N = np.c_[X[:, :2] - np.r_[np.zeros((14, 2)), np.tile([8 * s, 0.0], (10, 1))], np.zeros(len(X))]
-    N /= np.linalg.norm(N, axis=1, keepdims=True)
-    ctx = replace(ctx, pre=replace(ctx.pre, points=X, normals=N))
-    fam, prim, on = _largest_feature(np.arange(len(X)), np.zeros(0, int), [np.array([0.0, 0.0, 1.0])],
-                                     REGISTRY["cylinder"], REGISTRY["plane"], rng, ctx)
-    assert fam.name == "cylinder" and np.isclose(prim.params["radius"], 3 * s)
-    assert on[:14].all() and not on[14:].any()
 
 
 def test_the_brackets_counterbores_come_out_as_hole_bore_and_step():

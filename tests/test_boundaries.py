@@ -209,23 +209,3 @@ def test_sides_of_two_faces_at_an_edge_and_of_a_plane_and_a_wide_cylinder():
     piece = Candidate(REGISTRY["cylinder"], cyl, half, 0.0, np.zeros(len(half)))
     rest = replace(bottom, indices=np.setdiff1d(bottom.indices, half))
     assert not _sides(Segmentation.of(n_pts, [rest, piece]), np.array([[0, 1]]), ctx).any()
-
-
-def test_a_piece_on_its_neighbours_own_surface_is_dissolved_into_it():
-    # Two segments of one exact surface (a face cut in two by a gap in its sampling, each
-    # piece fitted on its own) fit the smaller piece's points equally well, up to rounding:
-    # the tie goes to the larger segment.
-    cloud = synth.PARTS["block_with_hole_and_slot"](seed=0, n_points=12000)
-    ctx = context(cloud.points)
-    face = np.flatnonzero(cloud.labels == [p["name"] for p in cloud.primitives].index("box -z"))
-    P = ctx.pre.points[face]
-    c = plane_candidate(ctx, face)
-    u = P @ np.linalg.svd(P - P.mean(axis=0))[2][0]
-    small = face[u >= np.sort(u)[-2 * ctx.min_points]]
-    big = np.setdiff1d(face, small)
-    seg = Segmentation(len(cloud.points))
-    seg.add(c.record, big)
-    seg.add(c.record, small)
-    dissolve_redundant(seg, ctx, max(0.3 * ctx.spacing, ctx.tau), ctx.link)
-    seg.check()
-    assert len(seg) == 1 and len(seg.indices(0)) == len(face)

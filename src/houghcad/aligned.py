@@ -72,7 +72,7 @@ def _largest_feature(rest: np.ndarray, border: np.ndarray, axes: list[np.ndarray
     within τ, as ``(family, primitive, inlier mask (m,))``, or None when none holds
     ``ctx.min_points``; cylinders refitted with the boundary points ``border``
     (:func:`_refined`). A level wins a tie: a plane is the simpler surface."""
-    X, N = ctx.pre.points[rest], ctx.pre.normals[rest]
+    X = ctx.pre.points[rest]
     noisy = ctx.policy.one_aligned_cylinder
     found = []
     for a in axes:
@@ -88,17 +88,9 @@ def _largest_feature(rest: np.ndarray, border: np.ndarray, axes: list[np.ndarray
             foot = np.array([c[0], c[1], Q[on if on.any() else slice(None), 2].mean()])
             prim = Primitive("cylinder", {"axis_point": R.T @ foot, "axis": a.copy(), "radius": r})
             found.append((cyl, *_refined(cyl, prim, on, rest, border, ctx)))
-    cos = np.cos(np.radians(ctx.tol.splitting.aligned_normal_deg))
     best, count = None, ctx.min_points - 1
     for fam, prim, on in found:
-        if on.sum() <= count:
-            continue
-        # Rows of other surfaces line up at one level (the rings of a coaxial cylinder sampled
-        # in rings, scan lines): their normals stand across the level, while a small planar
-        # face's blended normals lean only part way towards the faces around it. (A small
-        # hole's normals are blends of its whole neighbourhood, often past 60°: circles are
-        # not held to this.)
-        if fam is cyl or np.median(np.abs(N[on] @ prim.params["normal"])) >= cos:
+        if on.sum() > count:
             best, count = (fam, prim, on), on.sum()
     return best
 

@@ -222,8 +222,7 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
     than the faces fit the same points. A segment smaller than ``3 *
     min_points`` is dissolved when every point lies within ``delta`` of a
     larger adjacent segment's surface (neighbours within ``reach``) and those
-    distances are on average no larger than its own (to ``dissolve_tie``: two
-    fits of one surface tie); each point goes to the nearest
+    distances are on average below its own; each point goes to the nearest
     such surface. A narrow true face (a fillet) fits its own points at least
     as well and stays.
     """
@@ -235,7 +234,6 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
     if len(small) == 0:
         return
     owner = seg.owner()
-    tie = ctx.tol.boundaries.dissolve_tie * ctx.tau
     gone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for j in small[np.argsort(sizes[small], kind="stable")]:
         s = seg[j]
@@ -249,7 +247,7 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
         d = np.stack([seg[a].family.distance(seg[a].prim, P[idx]) for a in adj])
         near = d.min(axis=0)
         own = s.family.distance(s.prim, P[idx])
-        if not (near < delta).all() or near.mean() > own.mean() + tie:
+        if not (near < delta).all() or near.mean() >= own.mean():
             continue
         gone[int(j)] = (idx, np.asarray(adj)[d.argmin(axis=0)])
     if not gone:

@@ -134,9 +134,6 @@ class SplittingTolerances:
     aligned_refits: int = tol(2, "refits", "refits of a cylinder on its points and the boundary rows")
     aligned_pieces: int = tol(4, "features", "features aligned with the neighbours taken per cluster: a counterbore "
                               "is three (bore, step, hole); a surface the normals missed, sliced into rings, is many")
-    aligned_normal_deg: float = tol(60.0, "degrees", "most of a level's points have normals this close to its "
-                                    "normal: a small planar face's blended normals lean up to about 30° towards its "
-                                    "neighbours, rows of a coaxial surface at one level stand at about 90°")
     aligned_cover: float = tol(0.8, "share", "the aligned features must explain this much of the cluster together")
     crease_neighbours: int = tol(6, "points", "a cluster's crease point takes the PCA normal of this many of the "
                                  "cluster's points: on a hole a few spacings wide, more reach across it")
@@ -158,8 +155,6 @@ class BoundaryTolerances:
     sound_fit: float = tol(1.5, "ratio to the median fit", "a primitive fitting worse than this is wrong, and keeps "
                            "the nearest-surface rule")
     dissolve_size: float = tol(3.0, "min_points", "segments smaller than this may be slivers")
-    dissolve_tie: float = tol(0.01, "τ", "a neighbour fitting a sliver's points within this of its own fit explains "
-                              "them as well: two fits of one exact surface differ by rounding")
 
 
 @dataclass(frozen=True)
