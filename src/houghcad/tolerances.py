@@ -84,8 +84,6 @@ class RecognitionTolerances:
     trim_min_points: float = tol(2.0, "min_points", "trimming keeps enough points to refit")
     strip_width_spacings: float = tol(0.4, "spacings", "a dense subset narrower than this across is a one-row strip, "
                                       "not a surface patch")
-    strip_neighbours: int = tol(8, "neighbours", "points around a strip checked for the rows its neighbours took")
-    strip_min_points: int = tol(3, "points", "a strip's surrounding rows need a covariance")
     slice_sigmas: float = tol(2.0, "σ", "on the whole cloud a candidate fitting worse than this (and slice_taus) is a "
                               "tangent slice that another family explains exactly")
     slice_taus: float = tol(0.1, "τ", "the tangent-slice gate on exact samples")
