@@ -208,16 +208,20 @@ def _segment(points: np.ndarray, families: str, v: Variant, record: bool = False
     from houghcad import noise
 
     # The clean policy is a module constant read when a run chooses its policy; a variant replaces
-    # it in this worker process for the run.
-    noise.CLEAN = dataclasses.replace(_CLEAN, **{f: True for f in v.clean_policy})
+    # it for the run, and the constant is put back after it (callers compare policies by identity).
+    if v.clean_policy:
+        noise.CLEAN = dataclasses.replace(_CLEAN, **{f: True for f in v.clean_policy})
     kw = dict(families=families, seed=0, skip=v.skip, tolerances=dict(v.tolerances), n_jobs=1)
-    if not record:
-        return houghcad.segment(points, **kw), None
-    changed: set[str] = set()
-    before: set[str] = set()
-    with reads_recorded() as reads:
-        res = houghcad.segment(points, trace=passes_that_change(changed, reads, before), **kw)
-    return res, (frozenset(reads | changed), frozenset(before))
+    try:
+        if not record:
+            return houghcad.segment(points, **kw), None
+        changed: set[str] = set()
+        before: set[str] = set()
+        with reads_recorded() as reads:
+            res = houghcad.segment(points, trace=passes_that_change(changed, reads, before), **kw)
+        return res, (frozenset(reads | changed), frozenset(before))
+    finally:
+        noise.CLEAN = _CLEAN
 
 
 def _case(kind: str, name: str, arg) -> tuple[np.ndarray, list, str]:

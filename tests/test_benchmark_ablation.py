@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from houghcad import synth
+from houghcad import noise
 from houghcad.noise import NoisePolicy
 from houghcad.tolerances import RecognitionTolerances, Tolerances
 
@@ -37,6 +38,13 @@ def test_reads_records_fields_read_outside_bulk_copies():
     # The classes are as they were after the block.
     assert "__getattribute__" not in RecognitionTolerances.__dict__
     assert "__getattribute__" not in NoisePolicy.__dict__
+
+
+def test_policy_variant_leaves_the_clean_policy_as_it_was():
+    clean = noise.CLEAN
+    cloud = synth.block_with_hole_and_slot(seed=0, n_points=1500)
+    ablation._segment(cloud.points, "simple", ablation.Variant("x", clean_policy=("strict_cover",)))
+    assert noise.CLEAN is clean and noise.choose("clean", 0.0, 1.0) is clean
 
 
 def test_variant_not_reached_gives_the_baseline_output(clean_block):
