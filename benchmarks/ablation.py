@@ -37,10 +37,10 @@ import argparse
 import csv
 import io
 import multiprocessing as mp
+import pickle
 import re
 import sys
 import time
-import pickle
 from contextlib import contextmanager
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -83,9 +83,9 @@ class Variant:
     clean_policy: tuple[str, ...] = ()
 
     def reaches(self, reads: frozenset[str]) -> bool:
-        """Whether the change can touch a case whose baseline run read ``reads`` (see
-        :func:`case_reads`): a tolerance or switch it read, a pass (or a follow-up of it) that
-        changed the state."""
+        """Whether the change can touch a case whose baseline run read ``reads`` (the baseline row's
+        ``reads``, from :func:`reads_recorded` and :func:`passes_that_change`): a tolerance or
+        switch it read, a pass (or a follow-up of it) that changed the state."""
         keys = {k for k, _ in self.tolerances} | {f"policy.{f}" for f in self.clean_policy}
         if keys & reads:
             return True
@@ -418,18 +418,19 @@ def _run_variants(pool, todo: list[Variant], fit4cad: Path, cache: Path) -> None
     before = frozenset(k for r in base.values() for k in (r.get("reads_before_association") or "").split())
     batch = [v for v in todo if recorded and v.association_only(before)]
     rows: dict[str, list[dict]] = {v.name: [] for v in todo}
-    runs: list[tuple] = []
+    runs: dict[str, list[tuple]] = {v.name: [] for v in todo}
     per_case: dict[str, tuple[list[Variant], tuple]] = {}
     t0 = time.perf_counter()
     for v in todo:
         for task in tasks(v, fit4cad):
-            b = base.get(_key(task[1], task[2], task[3]))
+            key = _key(task[1], task[2], task[3])
+            b = base.get(key)
             if b is not None and b.get("reads") is not None and not v.reaches(frozenset(b["reads"].split())):
                 rows[v.name].append(dict(b, variant=v.name, reused="1", reads="", reads_before_association=""))
             elif v in batch:
-                per_case.setdefault(_key(task[1], task[2], task[3]), ([], task[1:]))[0].append(v)
+                per_case.setdefault(key, ([], task[1:]))[0].append(v)
             else:
-                runs.append(task)
+                runs[v.name].append(task)
     if per_case:
         for out in pool.imap(run_association_task, [(tuple(vs), *rest) for vs, rest in per_case.values()]):
             for r in out:
@@ -442,11 +443,10 @@ def _run_variants(pool, todo: list[Variant], fit4cad: Path, cache: Path) -> None
     # delete or switch on), then the tolerances; within each, those reaching the fewest cases first,
     # so that a study cut short has measured the most variants.
     rest = sorted((v for v in todo if v not in batch),
-                  key=lambda v: (not (v.skip or v.clean_policy or v.name.startswith("off-")),
-                                 sum(task[0] is v for task in runs)))
+                  key=lambda v: (not (v.skip or v.clean_policy or v.name.startswith("off-")), len(runs[v.name])))
     for v in rest:
         t = time.perf_counter()
-        mine = [task for task in runs if task[0] is v]
+        mine = runs[v.name]
         rows[v.name] += list(pool.imap(run_task, mine, chunksize=1))
         _write(cache / f"{v.name}.csv", rows[v.name])
         print(f"{v.name}: {len(mine)} cases run, {len(rows[v.name]) - len(mine)} kept from the baseline "

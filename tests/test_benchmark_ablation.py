@@ -8,8 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from houghcad import synth
-from houghcad import noise
+from houghcad import noise, synth
 from houghcad.noise import NoisePolicy
 from houghcad.tolerances import RecognitionTolerances, Tolerances
 

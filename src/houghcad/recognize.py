@@ -138,7 +138,7 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
         if len(loc) < ctx.min_points:
             continue
         X = P[loc]
-        if not _patch(fam, prim, X, ctx):
+        if not _patch(X, ctx):
             continue
         if not ctx.local and not fam.well_determined(prim, X, ctx):
             continue
@@ -187,14 +187,9 @@ def _trimmed_refits(fam: Family, prim: Primitive, P: np.ndarray, N: np.ndarray, 
     return prim, ok, d
 
 
-def _patch(fam: Family, prim: Primitive, X: np.ndarray, ctx: Context) -> bool:
-    """Whether the dense subset X (m, 3) is a surface patch, not a one-row strip.
-
-    Every surface through a row of points fits it, so a strip says nothing of its family. (A strip
-    was once accepted on a cluster when the neighbours' rows beside it widened it to a patch; the
-    ablation found that rule worth under a thousandth on every Fit4CAD fold and nothing on the
-    synthetic parts, the bracket of small faces included, and it was deleted.)
-    """
+def _patch(X: np.ndarray, ctx: Context) -> bool:
+    """Whether the dense subset X (m, 3) is a surface patch, not a one-row strip: every surface
+    through a row of points fits it, so a strip says nothing of its family."""
     width = ctx.tol.recognition.strip_width_spacings * ctx.pre.spacing
     ev = np.linalg.eigvalsh(np.cov(X.T))
     return bool(np.sqrt(max(ev[1], 0)) >= width)
