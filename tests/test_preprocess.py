@@ -340,6 +340,34 @@ def test_sparse_clean_plate_is_not_taken_for_noise(seed):
     assert pre.normals_method == "pca"
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_plate_thinner_than_the_spacing_is_not_taken_for_noise(seed):
+    # Two exact faces half a spacing apart interleave: most 4-point neighbourhoods hold both,
+    # and every residual-based estimate read 0.4 spacings of noise (the cloud then followed
+    # the noisy policy). A tenth of the quadruples still lie on one face, to rounding.
+    rng = np.random.default_rng(seed)
+    n = 1500
+    P = np.column_stack([rng.uniform(0, 1, n), rng.uniform(0, 1, n), np.zeros(n)])
+    P[n // 2:, 2] = 0.012  # the spacing is about 0.018
+    pre = preprocess(P, seed=0)
+    assert pre.noise < 0.01 * pre.spacing
+    assert pre.normals_method == "pca"
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_low_noise_on_small_faces_is_read_near_its_value(seed):
+    # The bracket's narrow faces put two surfaces in 8 and 16 neighbours: at σ = 0.08 spacings
+    # they read 2.2-2.8 σ, past the noisy policy's threshold. The quadruple residuals' low
+    # quantile reads 1.3 σ.
+    from houghcad.noise import NOISY_SPACINGS
+
+    cloud = synth.bracket(seed=seed, n_points=4000, noise=0.0005)
+    pre = preprocess(cloud.points, seed=0)
+    sigma = 0.0005 * cloud.diagonal()
+    assert 0.7 < pre.noise / pre.transform.scale / sigma < 1.6
+    assert pre.noise < NOISY_SPACINGS * pre.spacing
+
+
 @pytest.mark.parametrize("name, noise", [("bracket", 0.002), ("plate_with_holes", 0.002), ("gear_like", 0.005)])
 def test_noise_estimate_of_a_noisy_part_with_small_features(name: str, noise: float):
     # 64 neighbours straddle the thin walls and small features: their residual alone read the
