@@ -117,6 +117,25 @@ def test_failures_become_rows(tiny_set: Path):
     assert row["DSC"] == 0.0 and row["error"] == "timeout after 8 s"
 
 
+def test_sparser_keeps_a_seeded_share_and_restricts_the_ground_truth():
+    pts = np.arange(3000 * 3, dtype=float).reshape(3000, 3)  # point i is (3i, 3i + 1, 3i + 2)
+    gt = [np.arange(0, 1000), np.arange(1000, 3000), np.arange(900, 1100)]  # overlaps, as Fit4CAD's may
+    p, g = bench.sparser("PC7", pts, gt, 0.25)
+    assert len(p) == 750 and np.all(np.diff(p[:, 0]) > 0)  # the input's order
+    again, _ = bench.sparser("PC7", pts, gt, 0.25)
+    assert np.array_equal(p, again)
+    assert not np.array_equal(bench.sparser("PC8", pts, gt, 0.25)[0], p)  # seeded by the cloud
+    for old, new in zip(gt, g):
+        kept = (p[:, 0] // 3).astype(int)
+        assert set(kept[new]) == set(old) & set(kept)  # every kept point of the segment, no other
+    assert len(bench.sparser("PC7", pts[:300], [np.arange(300)], 0.1)[0]) == 200  # at least 200
+
+
+def test_main_refuses_a_fraction_outside_the_unit_interval(tiny_set: Path, capsys):
+    assert bench.main([str(tiny_set), "--no-write", "--fraction", "0"]) == 2
+    assert "--fraction" in capsys.readouterr().err
+
+
 def test_main_writes_csv_and_summary(tiny_set: Path, tmp_path: Path, capsys):
     out = tmp_path / "rows.csv"
     code = bench.main([str(tiny_set), "--names", "PC2,PC10", "--no-write", "--out", str(out),
