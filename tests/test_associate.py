@@ -206,6 +206,62 @@ def test_a_narrow_face_is_one_part_across_a_gap_in_its_sampling(wall):
     assert len(merged.parts) == (1 if wall else 2)
 
 
+def _ring_in_two(wall: bool):
+    """A plane ring 2.5 spacings wide (an annular shoulder) cut into two arcs by two gaps of three
+    links, and a cylinder wall along its inner edge (the shoulder's neighbour) or apart."""
+    rng = np.random.default_rng(11)
+    th, z = rng.uniform(0, 2 * np.pi, 6000), rng.uniform(-1.0, 0.0, 6000)
+    W = np.column_stack([np.cos(th), np.sin(th), z])  # radius 1
+    spacing = float(np.median(cKDTree(W).query(W, k=2)[0][:, 1]))
+    reach = float(np.median(cKDTree(W).query(W, k=7)[0][:, 6]))
+    link, w = max(2 * spacing, 1.5 * reach), 2.5 * spacing
+    n = int(np.pi * ((1 + w) ** 2 - 1) / spacing ** 2)
+    r, t = np.sqrt(rng.uniform(1.0, (1 + w) ** 2, n)), rng.uniform(0, 2 * np.pi, n)
+    S = np.column_stack([r * np.cos(t), r * np.sin(t), np.zeros(n)])
+    S = S[np.abs(S[:, 1]) > 1.5 * link]  # two gaps of three links, across y = 0
+    plane = _world_prim("plane", normal=Z, point=[0, 0, 0])
+    shift = 0.0 if wall else -0.5
+    W[:, 2] += shift
+    return [(S[S[:, 1] > 0], plane), (S[S[:, 1] < 0], plane), (_cyl([0, 3, -1], Z, 0.5, 1.0, 800),
+            _world_prim("cylinder", axis_point=[0, 3, 0], axis=Z, radius=0.5)),
+            (W, _world_prim("cylinder", axis_point=[0, 0, 0], axis=Z, radius=1.0))]
+
+
+@pytest.mark.parametrize("wall", [True, False])
+def test_a_narrow_ring_is_one_part_across_gaps_in_its_sampling(wall):
+    # Each arc turns through half a turn: as a whole it is no row of points, but where it meets
+    # the gap it is one, and the gap continues it. With the wall apart the gaps are empty space.
+    a = _associate(_ring_in_two(wall))
+    merged = next(it for it in a.items_ if sorted(it.members) == [0, 1])
+    assert len(merged.parts) == (1 if wall else 2)
+
+
+def test_faces_that_taper_to_a_point_where_they_meet_stay_apart():
+    # A plane between a circle and the square around it: four CAD faces, each tapering to the
+    # points where the circle touches the square. Near those points each is a row, and the wall
+    # and the square's sides run on beside the gap, but no piece is a row along its length.
+    rng = np.random.default_rng(13)
+    n = 4000
+    th, z = rng.uniform(0, 2 * np.pi, n), rng.uniform(-1.0, 0.0, n)
+    wall = np.column_stack([np.cos(th), np.sin(th), z])
+    density = n / (2 * np.pi)  # points per unit area
+    Q = rng.uniform(-1, 1, (int(density * 4), 2))
+    Q = Q[np.hypot(Q[:, 0], Q[:, 1]) > 1.0]
+    flat = np.column_stack([Q, np.zeros(len(Q))])
+    plane = _world_prim("plane", normal=Z, point=[0, 0, 0])
+    blocks = [(flat[(np.sign(Q[:, 0]) == sx) & (np.sign(Q[:, 1]) == sy)], plane) for sx in (-1, 1) for sy in (-1, 1)]
+    blocks.append((wall, _world_prim("cylinder", axis_point=[0, 0, 0], axis=Z, radius=1.0)))
+    for axis, normal in ((0, X), (1, Y)):
+        for side in (-1.0, 1.0):
+            P = np.column_stack([rng.uniform(-1, 1, 1300), rng.uniform(0, 1, 1300)])
+            pts = np.zeros((1300, 3))
+            pts[:, axis], pts[:, 1 - axis], pts[:, 2] = side, P[:, 0], P[:, 1]
+            blocks.append((pts, _world_prim("plane", normal=normal, point=[side * (axis == 0), side * (axis == 1), 0])))
+    a = _associate(blocks)
+    merged = next(it for it in a.items_ if sorted(it.members) == [0, 1, 2, 3])
+    assert len(merged.parts) == 4
+
+
 def test_parallel_planes_closer_than_the_noise_floor_are_not_merged_when_distinct():
     # Two planes 0.02 apart (0.3 % of the diagonal): far beyond the inlier threshold
     # of exact points, so no single plane explains both.

@@ -96,6 +96,38 @@ def _row_axis(P: np.ndarray, width: float) -> np.ndarray | None:
     return vt[0] if hi - lo <= width else None
 
 
+def _ring_row(P: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Centre (3,) and unit normal (3,) of the circle along which the points P (n, 3) run as a
+    row narrower than ``width`` (their central 95 % across it, radially and along the normal),
+    else None: an annular land, a band of a cylinder, an arc of either."""
+    if len(P) < 6:
+        return None
+    Q = P[:: max(1, len(P) // EXTENT_POINTS)]
+    c0 = Q.mean(axis=0)
+    _, _, vt = np.linalg.svd(Q - c0, full_matrices=False)
+    x, y = (Q - c0) @ vt[0], (Q - c0) @ vt[1]
+    # Algebraic circle fit: x² + y² = 2 a x + 2 b y + c, linear in (a, b, c).
+    (a, b, c), *_ = np.linalg.lstsq(np.column_stack([2 * x, 2 * y, np.ones_like(x)]), x * x + y * y, rcond=None)
+    r = np.hypot(x - a, y - b)
+    if not np.isfinite(r).all() or np.ptp(np.percentile(r, EXTENT_PERCENTILES)) > width or \
+            np.ptp(np.percentile((Q - c0) @ vt[2], EXTENT_PERCENTILES)) > width:
+        return None
+    return c0 + a * vt[0] + b * vt[1], vt[2]
+
+
+def _row_direction(P: np.ndarray, at: np.ndarray, width: float) -> np.ndarray | None:
+    """Direction (3,) at the point ``at`` (3,) of the points P (n, 3) when they are a straight row
+    narrower than ``width`` (:func:`_row_axis`) or one along a circle (:func:`_ring_row`), else
+    None."""
+    axis = _row_axis(P, width)
+    if axis is not None:
+        return axis
+    ring = _ring_row(P, width)
+    if ring is None:
+        return None
+    return unit(np.cross(ring[1], at - ring[0]))
+
+
 def extent(P: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
     """Size of a segment, shape (3,), P's units (P: (n, 3)).
 
@@ -309,13 +341,19 @@ class Associator:
         nearest points runs along each), and the cloud goes on along the gap: every point of
         that segment lies within ``bridge_links`` × ``link`` of the surface and within
         ``link`` of some point of the cloud (the neighbouring faces' edges run on beside it).
-        Pieces closer than ``link`` are left to the contact rule (:meth:`_adjacency`); pieces
-        of a wide face, or apart across empty space, stay apart.
+        A row runs straight or along a circle (a narrow annular land, a band of a cylinder, an
+        arc of either): its direction is read where it meets the gap, the gap's between the
+        middles of the two rows' ends (their points within ``bridge_reach`` links of it). Faces
+        that taper to a point where they meet (pieces of a plane between a circle and the
+        square around it) are rows only there, and stay apart. Pieces closer than ``link`` are left to
+        the contact rule (:meth:`_adjacency`); pieces of a wide face, or apart across empty
+        space, stay apart.
         """
         P, fam, t = self._pre.points, cands[members[0]].family, self.tol
-        axes = {m: _row_axis(P[cands[m].indices], link) for m in members}
-        rows = [m for m in members if axes[m] is not None]
-        trees = {m: cKDTree(P[cands[m].indices]) for m in rows[1:]}
+        rows = [m for m in members if _row_axis(P[cands[m].indices], link) is not None
+                or _ring_row(P[cands[m].indices], link) is not None]
+        trees = {m: cKDTree(P[cands[m].indices]) for m in rows}
+        reach = t.bridge_reach * link
         cos_max = np.cos(np.radians(t.bridge_angle))
         out: set[tuple[int, int]] = set()
         for i, a in enumerate(rows):
@@ -326,8 +364,15 @@ class Associator:
                 if d[k] <= link:  # in contact: a line or a corner, as the contact rule says
                     continue
                 p, q = P[A[k]], P[B[j[k]]]
-                u = (q - p) / d[k]
-                if min(abs(u @ axes[a]), abs(u @ axes[b])) < cos_max:
+                ax_a, ax_b = _row_direction(P[A], p, link), _row_direction(P[B], q, link)
+                if ax_a is None or ax_b is None:
+                    continue
+                # From one row end's middle to the other's: the nearest points may sit on
+                # opposite sides of a row two spacings wide, as far apart across as along.
+                end_a, end_b = P[A[trees[a].query_ball_point(p, reach)]], P[B[trees[b].query_ball_point(q, reach)]]
+                u = end_b.mean(axis=0) - end_a.mean(axis=0)
+                u /= max(float(np.linalg.norm(u)), np.finfo(float).tiny)
+                if min(abs(u @ ax_a), abs(u @ ax_b)) < cos_max:
                     continue
                 S = p + np.linspace(0.0, 1.0, int(np.ceil(2 * d[k] / link)) + 1)[1:-1, None] * (q - p)
                 if np.any(fam.distance(prim, S) > t.bridge_links * link) or \

@@ -247,6 +247,8 @@ class AssociationTolerances:
                               "surface")
     bridge_angle: float = tol(25.0, "degrees", "a gap in a narrow face's sampling continues its row of points: "
                               "the pieces' axes are within this of the gap's direction")
+    bridge_reach: float = tol(3.0, "links", "a row's direction at a gap is read from its points this close to "
+                              "it: rings and arcs of narrow faces turn along their length")
     propose_lengths: float = tol(4.0, "length tolerances", "same-surface proposals are generous; the union refit "
                                  "decides")
     propose_angles: float = tol(3.0, "angle tolerances", "same-surface proposals are generous")
