@@ -36,10 +36,10 @@ import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from .families.base import Family, Frame, Primitive, regular_indices, unit
 from .adjacency import SegmentGraph
+from .bridges import bridged
 from .state import SegmentView
 from .tolerances import AssociationTolerances
 
@@ -83,49 +83,6 @@ class RawGroup:
     kind: str
     members: list[int]
     descriptors: dict = field(default_factory=dict)
-
-
-def _row_axis(P: np.ndarray, width: float) -> np.ndarray | None:
-    """Main axis (3,) of the points P (n, 3) when they are a row narrower than ``width`` across
-    (their central 95 % in the second principal direction), else None."""
-    if len(P) < 3:
-        return None
-    Q = P - P.mean(axis=0)
-    _, _, vt = np.linalg.svd(Q[:: max(1, len(Q) // EXTENT_POINTS)], full_matrices=False)
-    lo, hi = np.percentile(Q @ vt[1], EXTENT_PERCENTILES)
-    return vt[0] if hi - lo <= width else None
-
-
-def _ring_row(P: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """Centre (3,) and unit normal (3,) of the circle along which the points P (n, 3) run as a
-    row narrower than ``width`` (their central 95 % across it, radially and along the normal),
-    else None: an annular land, a band of a cylinder, an arc of either."""
-    if len(P) < 6:
-        return None
-    Q = P[:: max(1, len(P) // EXTENT_POINTS)]
-    c0 = Q.mean(axis=0)
-    _, _, vt = np.linalg.svd(Q - c0, full_matrices=False)
-    x, y = (Q - c0) @ vt[0], (Q - c0) @ vt[1]
-    # Algebraic circle fit: x² + y² = 2 a x + 2 b y + c, linear in (a, b, c).
-    (a, b, c), *_ = np.linalg.lstsq(np.column_stack([2 * x, 2 * y, np.ones_like(x)]), x * x + y * y, rcond=None)
-    r = np.hypot(x - a, y - b)
-    if not np.isfinite(r).all() or np.ptp(np.percentile(r, EXTENT_PERCENTILES)) > width or \
-            np.ptp(np.percentile((Q - c0) @ vt[2], EXTENT_PERCENTILES)) > width:
-        return None
-    return c0 + a * vt[0] + b * vt[1], vt[2]
-
-
-def _row_direction(P: np.ndarray, at: np.ndarray, width: float) -> np.ndarray | None:
-    """Direction (3,) at the point ``at`` (3,) of the points P (n, 3) when they are a straight row
-    narrower than ``width`` (:func:`_row_axis`) or one along a circle (:func:`_ring_row`), else
-    None."""
-    axis = _row_axis(P, width)
-    if axis is not None:
-        return axis
-    ring = _ring_row(P, width)
-    if ring is None:
-        return None
-    return unit(np.cross(ring[1], at - ring[0]))
 
 
 def extent(P: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
@@ -272,7 +229,9 @@ class Associator:
                 continue
             idx = np.sort(np.concatenate([cands[m].indices for m in members]))
             prim = self._refit(cands[members[0]].family, cands[members[0]].prim, idx)
-            parts_of = self._parts(members, adjacency | self._bridged(members, cands, prim, link))
+            gaps = bridged([cands[m].indices for m in members], self._pre.points, self._pre.tree,
+                           cands[members[0]].family, prim, link, self.tol)
+            parts_of = self._parts(members, adjacency | {(members[i], members[j]) for i, j in gaps})
             same.append((members, len(parts_of)))
             parts = [np.sort(np.concatenate([cands[m].indices for m in p])) for p in parts_of]
             items.append(Item(cands[members[0]].family, prim, idx, parts, members))
@@ -329,57 +288,6 @@ class Associator:
         u, v = g.edges[:, 0], g.edges[:, 1]
         ok = least >= self.tol.contact * np.sqrt(np.minimum(sizes[u], sizes[v]))
         return {(int(a), int(b)) for a, b in g.edges[ok].tolist()}
-
-    def _bridged(self, members: list[int], cands: list[SegmentView], prim: Primitive,
-                 link: float) -> set[tuple[int, int]]:
-        """Pairs (i < j) of members of one surface ``prim``: pieces of a narrow face apart across
-        a gap in its sampling.
-
-        A random sample of a face narrower than ``link`` is a row of points, whose gaps are far
-        longer than a wide face's: the splitting phase's pieces of it stay apart. Two such
-        pieces are one part when the gap continues both of them (the segment joining their
-        nearest points runs along each), and the cloud goes on along the gap: every point of
-        that segment lies within ``bridge_links`` × ``link`` of the surface and within
-        ``link`` of some point of the cloud (the neighbouring faces' edges run on beside it).
-        A row runs straight or along a circle (a narrow annular land, a band of a cylinder, an
-        arc of either): its direction is read where it meets the gap, the gap's between the
-        middles of the two rows' ends (their points within ``bridge_reach`` links of it). Faces
-        that taper to a point where they meet (pieces of a plane between a circle and the
-        square around it) are rows only there, and stay apart. Pieces closer than ``link`` are left to
-        the contact rule (:meth:`_adjacency`); pieces of a wide face, or apart across empty
-        space, stay apart.
-        """
-        P, fam, t = self._pre.points, cands[members[0]].family, self.tol
-        rows = [m for m in members if _row_axis(P[cands[m].indices], link) is not None
-                or _ring_row(P[cands[m].indices], link) is not None]
-        trees = {m: cKDTree(P[cands[m].indices]) for m in rows}
-        reach = t.bridge_reach * link
-        cos_max = np.cos(np.radians(t.bridge_angle))
-        out: set[tuple[int, int]] = set()
-        for i, a in enumerate(rows):
-            for b in rows[i + 1:]:
-                A, B = cands[a].indices, cands[b].indices
-                d, j = trees[b].query(P[A])
-                k = int(np.argmin(d))
-                if d[k] <= link:  # in contact: a line or a corner, as the contact rule says
-                    continue
-                p, q = P[A[k]], P[B[j[k]]]
-                ax_a, ax_b = _row_direction(P[A], p, link), _row_direction(P[B], q, link)
-                if ax_a is None or ax_b is None:
-                    continue
-                # From one row end's middle to the other's: the nearest points may sit on
-                # opposite sides of a row two spacings wide, as far apart across as along.
-                end_a, end_b = P[A[trees[a].query_ball_point(p, reach)]], P[B[trees[b].query_ball_point(q, reach)]]
-                u = end_b.mean(axis=0) - end_a.mean(axis=0)
-                u /= max(float(np.linalg.norm(u)), np.finfo(float).tiny)
-                if min(abs(u @ ax_a), abs(u @ ax_b)) < cos_max:
-                    continue
-                S = p + np.linspace(0.0, 1.0, int(np.ceil(2 * d[k] / link)) + 1)[1:-1, None] * (q - p)
-                if np.any(fam.distance(prim, S) > t.bridge_links * link) or \
-                        not np.all(np.isfinite(self._pre.tree.query(S, distance_upper_bound=link)[0])):
-                    continue
-                out.add((min(a, b), max(a, b)))
-        return out
 
     def _parts(self, members: list[int], adjacency: set[tuple[int, int]]) -> list[list[int]]:
         """Connected components of members under adjacency (lists of members)."""
