@@ -212,7 +212,7 @@ def sparser(name: str, points: np.ndarray, gt: list[np.ndarray], fraction: float
     keep = np.sort(rng.choice(n, min(n, max(int(n * fraction), 200)), replace=False))
     new = np.full(n, -1, dtype=np.int64)
     new[keep] = np.arange(len(keep))
-    return points[keep], [new[np.asarray(g)][new[np.asarray(g)] >= 0] for g in gt]
+    return points[keep], [r[r >= 0] for r in (new[np.asarray(g)] for g in gt)]
 
 
 def _cloud_task(args: tuple) -> dict[str, Any]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from houghcad.bridges import ring_row, row_axis, row_direction
+from houghcad.bridges import ring_row, row_axis, row_direction, row_shape
 
 
 def _ring(rng: np.random.Generator, r0: float, width: float, turn: tuple[float, float], n: int) -> np.ndarray:
@@ -28,8 +28,8 @@ def test_half_a_ring_is_a_row_along_its_circle_only():
     assert row_axis(P, 0.5) is None  # no straight row: it turns through half a turn
     centre, normal = ring_row(P, 0.5)
     assert np.allclose(centre, 0.0, atol=0.05) and abs(normal[2]) > 0.999
-    d = row_direction(P, np.array([5.15, 0.0, 0.0]), 0.5)  # the tangent where the arc starts
-    assert d is not None and abs(d[1]) > 0.999
+    d = row_direction(row_shape(P, 0.5), np.array([5.15, 0.0, 0.0]))  # the tangent where the arc starts
+    assert abs(d[1]) > 0.999
 
 
 def test_a_band_of_a_cylinder_is_a_row_along_its_circle():
@@ -50,4 +50,4 @@ def test_a_wide_face_and_a_tapering_one_are_no_rows():
     Q = Q[np.hypot(Q[:, 0], Q[:, 1]) > 1.0]
     corner = np.column_stack([Q, np.zeros(len(Q))])
     assert row_axis(corner, 0.1) is None and ring_row(corner, 0.1) is None
-    assert row_direction(corner, corner[0], 0.1) is None
+    assert row_shape(corner, 0.1) is None

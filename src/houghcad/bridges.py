@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 from .families.base import Family, Primitive, unit
 from .tolerances import AssociationTolerances
 
-__all__ = ["bridged", "ring_row", "row_axis", "row_direction"]
+__all__ = ["bridged", "ring_row", "row_axis", "row_direction", "row_shape"]
 
 #: A row's width spans the central 95 % of its points across it: a few edge points a piece took
 #: from its neighbour do not widen it.
@@ -55,17 +55,21 @@ def ring_row(P: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray] | Non
     return c0 + a * vt[0] + b * vt[1], vt[2]
 
 
-def row_direction(P: np.ndarray, at: np.ndarray, width: float) -> np.ndarray | None:
-    """Direction (3,) at the point ``at`` (3,) of the points P (n, 3) when they are a straight row
-    narrower than ``width`` (:func:`row_axis`) or one along a circle (:func:`ring_row`), else
+def row_shape(P: np.ndarray, width: float) -> np.ndarray | tuple[np.ndarray, np.ndarray] | None:
+    """What row the points P (n, 3) are, narrower than ``width``: the axis (3,) of a straight one
+    (:func:`row_axis`), else the centre and normal of a circular one (:func:`ring_row`), else
     None."""
     axis = row_axis(P, width)
-    if axis is not None:
-        return axis
-    ring = ring_row(P, width)
-    if ring is None:
-        return None
-    return unit(np.cross(ring[1], at - ring[0]))
+    return axis if axis is not None else ring_row(P, width)
+
+
+def row_direction(shape: np.ndarray | tuple[np.ndarray, np.ndarray], at: np.ndarray) -> np.ndarray:
+    """Direction (3,) at the point ``at`` (3,) of a row of :func:`row_shape` ``shape``: a straight
+    row's axis, a circular row's tangent there."""
+    if isinstance(shape, np.ndarray):
+        return shape
+    centre, normal = shape
+    return unit(np.cross(normal, at - centre))
 
 
 def bridged(pieces: list[np.ndarray], P: np.ndarray, tree: cKDTree, family: Family, prim: Primitive,
@@ -85,8 +89,8 @@ def bridged(pieces: list[np.ndarray], P: np.ndarray, tree: cKDTree, family: Fami
     closer than ``link`` are left to the contact rule; pieces of a wide face, or apart across
     empty space, stay apart.
     """
-    rows = [m for m, idx in enumerate(pieces)
-            if row_axis(P[idx], link) is not None or ring_row(P[idx], link) is not None]
+    shapes = {m: row_shape(P[idx], link) for m, idx in enumerate(pieces)}
+    rows = [m for m in shapes if shapes[m] is not None]
     trees = {m: cKDTree(P[pieces[m]]) for m in rows}
     reach = tol.bridge_reach * link
     cos_max = np.cos(np.radians(tol.bridge_angle))
@@ -99,9 +103,7 @@ def bridged(pieces: list[np.ndarray], P: np.ndarray, tree: cKDTree, family: Fami
             if d[k] <= link:  # in contact: a line or a corner, as the contact rule says
                 continue
             p, q = P[A[k]], P[B[j[k]]]
-            ax_a, ax_b = row_direction(P[A], p, link), row_direction(P[B], q, link)
-            if ax_a is None or ax_b is None:
-                continue
+            ax_a, ax_b = row_direction(shapes[a], p), row_direction(shapes[b], q)
             # From one row end's middle to the other's: the nearest points may sit on
             # opposite sides of a row two spacings wide, as far apart across as along.
             end_a, end_b = P[A[trees[a].query_ball_point(p, reach)]], P[B[trees[b].query_ball_point(q, reach)]]

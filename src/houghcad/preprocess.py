@@ -293,12 +293,12 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
         # Whether the cloud is noisy at all: on sparse samples the two faces
         # of a plate thinner than the spacing interleave, and so do the rows
         # of narrow faces, and fewer than a quarter of the quadruples lie on
-        # one face. Straddling and curvature
-        # only add to a quadruple's residual, so its low quantile bounds the
-        # noise: under Gaussian noise the 10th percentile is 0.06 σ up to
-        # σ = 0.3 spacings (synthetic planes and parts), less beyond, as the
-        # quadruple tilts into the noise. The bound therefore decides only
-        # that a cloud the estimates above read as noisy is clean.
+        # one face. Straddling and curvature only add to a quadruple's
+        # residual, so its low quantile bounds the noise: under Gaussian
+        # noise the 10th percentile is 0.06 σ up to σ = 0.3 spacings
+        # (synthetic planes and parts), less beyond, as the quadruple tilts
+        # into the noise. The bound therefore decides only that a cloud the
+        # estimates above read as noisy is clean.
         bound = QUADRUPLE_SIGMAS * float(q_low)
         if bound < NOISY_SPACINGS * spacing <= noise:
             noise = bound
