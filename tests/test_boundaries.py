@@ -209,3 +209,46 @@ def test_sides_of_two_faces_at_an_edge_and_of_a_plane_and_a_wide_cylinder():
     piece = Candidate(REGISTRY["cylinder"], cyl, half, 0.0, np.zeros(len(half)))
     rest = replace(bottom, indices=np.setdiff1d(bottom.indices, half))
     assert not _sides(Segmentation.of(n_pts, [rest, piece]), np.array([[0, 1]]), ctx).any()
+
+
+def test_settle_edges_compares_cores_not_sizes():
+    # A flat strip between two fillets (quarter cylinders tangent to it) holds, beside its own
+    # points, the two boundary rows (on both surfaces) and a wide tangent band of the right
+    # fillet, which makes it larger than the left fillet. Its core, the points on no other
+    # surface, is smaller: the left rows stay with the strip (by sizes they went to the fillet).
+    rng = np.random.default_rng(0)
+    n_arc, n_strip, n_row, w, arc = 400, 200, 40, 0.1, np.radians(40)
+
+    def fillet(side: int) -> np.ndarray:  # radius 1 about an axis along y, tangent to z = 1 at x = side w
+        th = rng.uniform(np.pi / 2 - arc, np.pi / 2, n_arc)
+        return np.column_stack([side * (w + np.cos(th)), rng.uniform(-1, 1, n_arc), np.sin(th)])
+
+    strip = np.column_stack([rng.uniform(-w, w, n_strip), rng.uniform(-1, 1, n_strip), np.ones(n_strip)])
+    rows = [np.column_stack([np.full(n_row, s * w), rng.uniform(-1, 1, n_row), np.ones(n_row)]) for s in (-1, 1)]
+    P = np.vstack([fillet(-1), fillet(1), strip, *rows])
+    ctx = context(P)
+    T, X = ctx.pre.transform, ctx.pre.points
+    cfam = REGISTRY["cylinder"]
+    cyl = [Primitive("cylinder", {"axis_point": T.points(np.array([[s * w, 0.0, 0.0]]))[0],
+                                  "axis": T.dirs(np.array([[0.0, 1.0, 0.0]]))[0],
+                                  "radius": 1.0 / T.inv_length(1.0)}) for s in (-1, 1)]
+    plane = plane_candidate(ctx, np.arange(2 * n_arc, 2 * n_arc + n_strip))
+    d_plane = REGISTRY["plane"].distance(plane.prim, X)
+    i = np.arange(len(P))
+    band = np.flatnonzero(((d_plane < 0.2 * ctx.tau) & (i < n_arc)) |
+                          ((d_plane < 6 * ctx.tau) & (i >= n_arc) & (i < 2 * n_arc)))
+    left_rows = np.arange(2 * n_arc + n_strip, 2 * n_arc + n_strip + n_row)
+    strip_idx = np.r_[np.arange(2 * n_arc, len(P)), band]
+    cands = [Candidate(REGISTRY["plane"], plane.prim, strip_idx, 0.0, d_plane[strip_idx])]
+    for a, prim in zip((np.arange(n_arc), np.arange(n_arc, 2 * n_arc)), cyl):
+        own = np.setdiff1d(a, band)
+        cands.append(Candidate(cfam, prim, own, 0.0, cfam.distance(prim, X[own])))
+    seg = Segmentation.of(len(P), cands)
+    assert seg.sizes()[0] > seg.sizes()[1]
+    settle_edges(seg, ctx, max(0.3 * ctx.pre.spacing, ctx.tau), ctx.link)
+    seg.check()
+    assert (seg.labels[left_rows] == 0).mean() >= 0.9  # 0.075 by sizes
+    # The right fillet's band points well off the strip's plane go back to it, those next to
+    # the fillet's own points first (one ring of neighbours a call: 32 of these 35).
+    right = band[(band >= n_arc) & (d_plane[band] > 2 * ctx.tau)]
+    assert len(right) >= 20 and (seg.labels[right] == 2).mean() >= 0.8

@@ -38,51 +38,83 @@ def _reassign(seg: Segmentation, owner: np.ndarray, best: np.ndarray, min_points
 
 
 def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) -> None:
-    """Give the points that lie on two adjacent segments' surfaces to the smaller one,
-    and unsegmented points that lie on an adjacent segment's surface to it.
+    """Give each point to the nearest surface it lies on, and a point that lies on
+    several adjacent segments' surfaces to the one with the smallest core.
 
     CAD samples include the faces' boundary curves, which lie on both faces;
     whoever was accepted first took them. To a narrow face (a fillet, a
     chamfer, a hole) those rows are a large share of its points, to a wide
-    one a negligible share. A point moves only if it lies on the smaller
-    surface as closely as on its own, within ``settle_slack`` τ: a small
-    surface that crosses a face at a shallow angle (a cylinder fitted across
-    three narrow strips) passes within ``delta`` of a wide band of the face's
-    points, which lie exactly on their own, and so does a face that continues
-    another tangentially (a plane beyond a fillet), whose distance grows only
-    as the square of the distance from the tangent line. ``delta``: distance
-    to a surface that counts as on it (standard units).
+    one a negligible share. A segment's core is its points that lie on no
+    other surface: a narrow face that took the tangent bands of the wide
+    ones beside it (a cylinder between two fillets) is large by its points
+    and small by its core.
+
+    A point lies on a surface within ``delta`` of it (standard units) and
+    within an allowance of the nearest one: ``settle_slack`` τ, or
+    ``settle_fits`` times the segment's median distance to its surface,
+    since a small face's fit leaves its boundary rows that far off it. A
+    face that continues another tangentially (a plane beyond a fillet)
+    passes within τ of the other's rows beside the tangent line, as the
+    square of the distance from it, and a small surface crossing a face at
+    a shallow angle within ``delta`` of a wide band of it; those points lie
+    exactly on their own face and stay.
     """
     if len(seg) < 2:
         return
     P = ctx.pre.points
     owner = seg.owner()
-    sizes = seg.sizes()
-    best = owner.copy()
-    best_size = np.where(owner >= 0, sizes[np.maximum(owner, 0)], np.iinfo(np.int64).max)
     pts = np.arange(len(P))
     _, other = _neighbour_owners(owner, pts, ctx, reach, ctx.tol.boundaries.neighbours)
-    # Pairs (point, adjacent smaller segment), each once; unsegmented points
-    # count as owned by an infinitely large segment.
-    mask = (other >= 0) & (other != owner[pts][:, None])
-    mask &= sizes[np.maximum(other, 0)] < best_size[pts][:, None]
+    mask = (other >= 0) & (other != owner[:, None])
     if not mask.any():
         return
-    pi = np.broadcast_to(pts[:, None], other.shape)[mask]
-    sj = other[mask]
-    pairs = np.unique(np.stack([sj, pi], axis=1), axis=0)
-    own = np.full(len(P), np.inf)
+    pairs = np.unique(np.stack([other[mask], np.broadcast_to(pts[:, None], other.shape)[mask]], axis=1), axis=0)
     moving = np.unique(pairs[:, 1])
+    own = np.full(len(P), np.inf)
     own[moving] = _own_distance(seg, owner, moving, P)
+    d = np.empty(len(pairs))
     for j in np.unique(pairs[:, 0]):
-        cand = pairs[pairs[:, 0] == j, 1]
-        s = seg[j]
-        d = s.family.distance(s.prim, P[cand])
-        cand = cand[(d < delta) & (d <= own[cand] + ctx.tol.boundaries.settle_slack * ctx.tau)]
-        cand = cand[sizes[j] < best_size[cand]]
-        best[cand] = j
-        best_size[cand] = sizes[j]
+        at = pairs[:, 0] == j
+        s = seg[int(j)]
+        d[at] = s.family.distance(s.prim, P[pairs[at, 1]])
+    # The nearest surface of each point: its own, or an adjacent one within delta.
+    nearest = own.copy()
+    ok = d < delta
+    np.minimum.at(nearest, pairs[ok, 1], d[ok])
+    t = ctx.tol.boundaries
+    allow = np.maximum(t.settle_slack * ctx.tau, t.settle_fits * _fit_errors(seg, P))
+    on = ok & (d <= nearest[pairs[:, 1]] + allow[pairs[:, 0]])
+    if not on.any():
+        return
+    # Cores: the points each segment owns that lie on no other surface.
+    contested = np.zeros(len(P), dtype=bool)
+    contested[pairs[on, 1]] = True
+    core = np.bincount(owner[(owner >= 0) & ~contested], minlength=len(seg)).astype(np.int64)
+    big = np.iinfo(np.int64).max
+    own_ok = (owner >= 0) & (own <= nearest + allow[np.maximum(owner, 0)])
+    best = np.where(own_ok, owner, -1)
+    best_core = np.where(own_ok, core[np.maximum(owner, 0)], big)
+    # Smallest core first; equal cores keep the owner, then the lower index.
+    cand = pairs[on]
+    order = np.lexsort((cand[:, 0], core[cand[:, 0]]))
+    cand = cand[order]
+    first = np.unique(cand[:, 1], return_index=True)[1]
+    j, p = cand[first, 0], cand[first, 1]
+    win = core[j] < best_core[p]
+    best[p[win]] = j[win]
+    best = np.where((best < 0) & (owner >= 0), owner, best)
     _reassign(seg, owner, best, ctx.min_points)
+
+
+def _fit_errors(seg: Segmentation, P: np.ndarray) -> np.ndarray:
+    """Median distance (m,) of each of the m segments' points to its surface (standard units):
+    robust to the few points of a neighbour that a segment may hold."""
+    out = np.zeros(len(seg))
+    for k in range(len(seg)):
+        s = seg[k]
+        if len(s.indices):
+            out[k] = float(np.median(s.family.distance(s.prim, P[s.indices])))
+    return out
 
 
 def _own_distance(seg: Segmentation, owner: np.ndarray, idx: np.ndarray, P: np.ndarray) -> np.ndarray:

@@ -144,8 +144,13 @@ class BoundaryTolerances:
     """Edge settling and dissolving (extensions, :mod:`houghcad.boundaries`)."""
 
     neighbours: int = tol(12, "neighbours", "points read around each point for adjacent segments")
-    settle_slack: float = tol(0.5, "τ", "a point on the smaller surface moves to it when no farther from it than from "
-                              "its own surface plus this")
+    settle_slack: float = tol(0.1, "τ", "a point lies on every surface no farther from it than the nearest plus this "
+                              "(or settle_fits): a face continuing another tangentially passes nearer than τ "
+                              "to the other's rows beside the tangent line, which are not on it; 0.5 lost "
+                              "0.0004 mean DSC on Fit4CAD (without settle_fits)")
+    settle_fits: float = tol(4.0, "median distances", "a surface's distances are only as sure as its fit: a small "
+                             "face's boundary rows lie up to this many times its points' median distance off it; "
+                             "2 and 8 gave 0.0004 and 0.0001 less mean DSC on Fit4CAD")
     noisy_rounds: int = tol(8, "rounds", "each round moves the points next to the boundary; it walks to where the "
                             "surfaces cross")
     side_links: float = tol(3.0, "links", "a face's points this near the other face tell its side")
