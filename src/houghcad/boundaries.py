@@ -58,16 +58,28 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     square of the distance from it, and a small surface crossing a face at
     a shallow angle within ``delta`` of a wide band of it; those points lie
     exactly on their own face and stay.
+
+    A round settles the points next to a boundary (``neighbours`` of them
+    within ``reach``); rounds repeat, at most ``settle_rounds``, while
+    points move, since a band a segment took beside its boundary is
+    deeper than one ring.
     """
+    for _ in range(ctx.tol.boundaries.settle_rounds):
+        if not _settle_round(seg, ctx, delta, reach):
+            return
+
+
+def _settle_round(seg: Segmentation, ctx: Context, delta: float, reach: float) -> bool:
+    """One round of :func:`settle_edges`; whether any point moved."""
     if len(seg) < 2:
-        return
+        return False
     P = ctx.pre.points
     owner = seg.owner()
     pts = np.arange(len(P))
     _, other = _neighbour_owners(owner, pts, ctx, reach, ctx.tol.boundaries.neighbours)
     mask = (other >= 0) & (other != owner[:, None])
     if not mask.any():
-        return
+        return False
     pairs = np.unique(np.stack([other[mask], np.broadcast_to(pts[:, None], other.shape)[mask]], axis=1), axis=0)
     moving = np.unique(pairs[:, 1])
     own = np.full(len(P), np.inf)
@@ -85,7 +97,7 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     allow = np.maximum(t.settle_slack * ctx.tau, t.settle_fits * _fit_errors(seg, P))
     on = ok & (d <= nearest[pairs[:, 1]] + allow[pairs[:, 0]])
     if not on.any():
-        return
+        return False
     # Cores: the points each segment owns that lie on no other surface.
     contested = np.zeros(len(P), dtype=bool)
     contested[pairs[on, 1]] = True
@@ -103,7 +115,7 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     win = core[j] < best_core[p]
     best[p[win]] = j[win]
     best = np.where((best < 0) & (owner >= 0), owner, best)
-    _reassign(seg, owner, best, ctx.min_points)
+    return _reassign(seg, owner, best, ctx.min_points)
 
 
 def _fit_errors(seg: Segmentation, P: np.ndarray) -> np.ndarray:

@@ -148,7 +148,7 @@ def prefer_planes_pass(seg: Segmentation, run: Run) -> Segmentation:
 
 def settle_edges_pass(seg: Segmentation, run: Run) -> Segmentation:
     """Clean clouds: the faces' boundary curves lie on both faces; their
-    points go to the smaller one."""
+    points go to the face with the smaller core."""
     settle_edges(seg, run.ctx, on_surface(run.ctx), run.ctx.link)
     return seg
 
