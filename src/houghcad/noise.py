@@ -68,7 +68,7 @@ class NoisePolicy:
         Boundaries go where the surfaces cross (nearest surface, with the
         sides of each edge), then poor fits are revisited, fillets sought and
         flat curved segments made planes; on clean clouds the boundary rows,
-        which lie on both faces, go to the smaller face.
+        which lie on both faces, go to the face with the smaller core.
     torus_grid_from_points : bool
         The torus accumulator's major radii stop at the points' own distances
         from the axis. On exact samples they reach on to where the points'
