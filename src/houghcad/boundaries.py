@@ -81,9 +81,7 @@ def _settle_round(seg: Segmentation, ctx: Context, delta: float, reach: float) -
     if not mask.any():
         return False
     pairs = np.unique(np.stack([other[mask], np.broadcast_to(pts[:, None], other.shape)[mask]], axis=1), axis=0)
-    moving = np.unique(pairs[:, 1])
-    own = np.full(len(P), np.inf)
-    own[moving] = _own_distance(seg, owner, moving, P)
+    own, fit = _owned_distances(seg, P)
     d = np.empty(len(pairs))
     for j in np.unique(pairs[:, 0]):
         at = pairs[:, 0] == j
@@ -94,7 +92,7 @@ def _settle_round(seg: Segmentation, ctx: Context, delta: float, reach: float) -
     ok = d < delta
     np.minimum.at(nearest, pairs[ok, 1], d[ok])
     t = ctx.tol.boundaries
-    allow = np.maximum(t.settle_slack * ctx.tau, t.settle_fits * _fit_errors(seg, P))
+    allow = np.maximum(t.settle_slack * ctx.tau, t.settle_fits * fit)
     on = ok & (d <= nearest[pairs[:, 1]] + allow[pairs[:, 0]])
     if not on.any():
         return False
@@ -113,32 +111,24 @@ def _settle_round(seg: Segmentation, ctx: Context, delta: float, reach: float) -
     first = np.unique(cand[:, 1], return_index=True)[1]
     j, p = cand[first, 0], cand[first, 1]
     win = core[j] < best_core[p]
+    # An owned point off its own surface by more than the allowance lies on the nearer one, which
+    # is a candidate: every point ends with a segment when it had one.
     best[p[win]] = j[win]
-    best = np.where((best < 0) & (owner >= 0), owner, best)
     return _reassign(seg, owner, best, ctx.min_points)
 
 
-def _fit_errors(seg: Segmentation, P: np.ndarray) -> np.ndarray:
-    """Median distance (m,) of each of the m segments' points to its surface (standard units):
-    robust to the few points of a neighbour that a segment may hold."""
-    out = np.zeros(len(seg))
+def _owned_distances(seg: Segmentation, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (n,) of every point of P (n, 3) to its own segment's surface (inf when
+    unsegmented), and each of the m segments' median (m,), robust to the few points of a
+    neighbour that a segment may hold (standard units)."""
+    dist = np.full(len(P), np.inf)
+    median = np.zeros(len(seg))
     for k in range(len(seg)):
         s = seg[k]
         if len(s.indices):
-            out[k] = float(np.median(s.family.distance(s.prim, P[s.indices])))
-    return out
-
-
-def _own_distance(seg: Segmentation, owner: np.ndarray, idx: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """Distance (m,) of the points ``idx`` (m,) to their own segment's surface (inf when
-    unsegmented); ``owner`` (n,) holds every point's segment."""
-    own = np.full(len(idx), np.inf)
-    o = owner[idx]
-    for k in np.unique(o[o >= 0]):
-        at = o == k
-        s = seg[int(k)]
-        own[at] = s.family.distance(s.prim, P[idx[at]])
-    return own
+            dist[s.indices] = s.family.distance(s.prim, P[s.indices])
+            median[k] = float(np.median(dist[s.indices]))
+    return dist, median
 
 
 def settle_noisy_edges(seg: Segmentation, ctx: Context, reach: float) -> None:
