@@ -378,3 +378,34 @@ def test_noise_estimate_of_a_noisy_part_with_small_features(name: str, noise: fl
     pre = preprocess(cloud.points, noise="noisy")
     sigma = noise * cloud.diagonal()  # world units
     assert 0.7 < pre.noise / pre.transform.scale / sigma < 1.8  # 64 neighbours alone: up to 4.2
+
+
+@pytest.mark.parametrize("anchored", [False, True])
+def test_voting_normals_do_not_depend_on_threads_or_chunks(anchored):
+    """The triples are drawn in one stream, in order, and the threads only share the voting:
+    the same normals for any number of threads, and for chunks of draws cut anywhere else than
+    the stream's (the draws of a chunk are the same)."""
+    cloud = synth.block_with_hole_and_slot(seed=1, n_points=5000)
+    P = cloud.points
+    nbr = cKDTree(P).query(P, k=16)[1]
+    one = voting_normals(P, nbr, seed=4, chunk=3000, anchored=anchored)
+    np.testing.assert_array_equal(one, voting_normals(P, nbr, seed=4, chunk=3000, anchored=anchored, workers=2))
+    np.testing.assert_array_equal(one[:3000], voting_normals(P, nbr[:3000], seed=4, chunk=3000, anchored=anchored))
+
+
+def test_neighbour_tables_are_the_per_point_queries_and_stay_with_their_points():
+    from dataclasses import replace
+
+    pre = preprocess(synth.block_with_hole_and_slot(seed=0, n_points=3000).points)
+    r = 2.5 * pre.spacing
+    nb, near = pre.neighbours_within(8, r, workers=2)
+    assert nb.dtype == np.int32 and nb.shape == near.shape == (3000, 8)
+    assert pre.neighbours_within(8, r) is not None and pre.neighbours_within(8, r)[0] is nb  # read once
+    for i in (0, 17, 2999):
+        d, j = pre.tree.query(pre.points[i], k=8, distance_upper_bound=r)
+        np.testing.assert_array_equal(near[i], np.isfinite(d))
+        np.testing.assert_array_equal(nb[i][near[i]], j[np.isfinite(d)])
+    assert 0 < near.sum() < near.size
+    # Another state of the points (dataclasses.replace) reads its own tables.
+    moved = replace(pre, points=pre.points * 2)
+    assert moved.neighbours_within(8, r)[0] is not nb

@@ -229,3 +229,26 @@ def test_a_stacked_family_cannot_be_pointwise():
     both = type("Both", (type(fam),), {"pointwise": True})()
     with pytest.raises(InputError, match="stacked"):
         check(both)
+
+
+def test_the_axis_votes_neighbour_table_is_built_when_first_read():
+    """A vote's context names its points; their neighbour table among themselves is built when
+    the cylinders' axis vote reads it, and kept for the next read on the same points."""
+    from scipy.spatial import cKDTree
+
+    from _helpers import context
+    from houghcad.context import neighbour_table
+    from houghcad.recognize import voting_context
+
+    ctx = context(synth.block_with_hole_and_slot(seed=0, n_points=3000).points)
+    idx = np.arange(0, 3000, 2)
+    v = voting_context(idx, ctx)
+    assert v.voting is idx and v.neighbors is None and neighbour_table(ctx) is None
+    table = neighbour_table(v)
+    P = ctx.pre.points[idx]
+    np.testing.assert_array_equal(table, cKDTree(P).query(P, k=ctx.tol.recognition.neighbours)[1])
+    assert neighbour_table(voting_context(idx.copy(), ctx)) is table  # the same points: kept
+    other = neighbour_table(voting_context(idx[:-1], ctx))
+    assert other is not table and len(other) == len(idx) - 1
+    given = np.zeros((len(idx), 4), int)
+    assert neighbour_table(replace(v, neighbors=given)) is given

@@ -50,7 +50,8 @@ class SegmentGraph:
 
     @classmethod
     def build(cls, labels: np.ndarray, P: np.ndarray, link: float, k: int | None = None,
-              tree: cKDTree | None = None, workers: int = 1) -> "SegmentGraph":
+              tree: cKDTree | None = None, workers: int = 1,
+              table: tuple[np.ndarray, np.ndarray] | None = None) -> "SegmentGraph":
         """The graph of the segments ``labels`` (n,) (-1: free) over points P (n, 3).
 
         With ``k`` the contacts are each segmented point's k nearest points
@@ -59,7 +60,9 @@ class SegmentGraph:
         ``contact`` the distinct querying points on each side, and ``cross``
         holds (querying point, neighbour). Without it every pair of segmented
         points closer than ``link`` counts once. ``workers``: the query's
-        threads (the result does not depend on them).
+        threads (the result does not depend on them). ``table``: every point's k
+        nearest within ``link`` as :meth:`~houghcad.preprocess.Preprocessed.neighbours_within`
+        gives them, read instead of querying ``tree``.
         """
         labels = np.asarray(labels, dtype=np.int64)
         m = max(int(labels.max(initial=-1)) + 1, 1)
@@ -69,9 +72,12 @@ class SegmentGraph:
                 np.zeros((0, 2), np.int64)
             a, b = owned[close[:, 0]], owned[close[:, 1]]
         else:
-            tree = cKDTree(P) if tree is None else tree
-            dist, nb = tree.query(P[owned], k=min(k, len(P)), distance_upper_bound=link, workers=workers)
-            ok = np.isfinite(dist)
+            if table is not None:
+                nb, ok = table[0][owned], table[1][owned]
+            else:
+                tree = cKDTree(P) if tree is None else tree
+                dist, nb = tree.query(P[owned], k=min(k, len(P)), distance_upper_bound=link, workers=workers)
+                ok = np.isfinite(dist)
             a = np.broadcast_to(owned[:, None], nb.shape)[ok]
             b = nb[ok].astype(np.int64)
         la, lb = labels[a], labels[b]
@@ -98,7 +104,8 @@ class SegmentGraph:
     @classmethod
     def of(cls, seg: Segmentation, ctx: Context, k: int | None = None) -> "SegmentGraph":
         """The graph of a segmentation state, at the run's link distance (see :meth:`build`)."""
-        return cls.build(seg.labels, ctx.pre.points, ctx.link, k, ctx.pre.tree, threads(ctx))
+        table = None if k is None else ctx.pre.neighbours_within(k, ctx.link, threads(ctx))
+        return cls.build(seg.labels, ctx.pre.points, ctx.link, k, ctx.pre.tree, threads(ctx), table)
 
     def neighbours(self, keep: np.ndarray | None = None) -> dict[int, set[int]]:
         """Each segment's neighbours over the edges ``keep`` (bool (k,); default all)."""

@@ -15,11 +15,9 @@ def _neighbour_owners(owner: np.ndarray, pts: np.ndarray, ctx: Context, reach: f
                       k: int) -> tuple[np.ndarray, np.ndarray]:
     """The k nearest neighbours (m, k) of the points ``pts`` within ``reach``
     (missing ones as index 0) and their segments in ``owner`` (-1: none)."""
-    P = ctx.pre.points
-    dist, nb = ctx.pre.tree.query(P[pts], k=min(k, len(P)), distance_upper_bound=reach, workers=threads(ctx))
-    ok = np.isfinite(dist)
-    nb = np.where(ok, nb, 0)
-    return nb, np.where(ok, owner[nb], -1)
+    nb, near = ctx.pre.neighbours_within(k, reach, threads(ctx))
+    nb, near = nb[pts], near[pts]
+    return nb, np.where(near, owner[nb], -1)
 
 
 def _reassign(seg: Segmentation, owner: np.ndarray, best: np.ndarray, min_points: int) -> bool:
@@ -64,23 +62,28 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
     points move, since a band a segment took beside its boundary is
     deeper than one ring.
     """
+    if len(seg) < 2:
+        return
+    # The points and the reach stay: one neighbour table serves every round.
+    nb, near = ctx.pre.neighbours_within(ctx.tol.boundaries.neighbours, reach, threads(ctx))
     for _ in range(ctx.tol.boundaries.settle_rounds):
-        if not _settle_round(seg, ctx, delta, reach):
+        if not _settle_round(seg, ctx, delta, nb, ~near):
             return
 
 
-def _settle_round(seg: Segmentation, ctx: Context, delta: float, reach: float) -> bool:
-    """One round of :func:`settle_edges`; whether any point moved."""
-    if len(seg) < 2:
-        return False
+def _settle_round(seg: Segmentation, ctx: Context, delta: float, nb: np.ndarray, far: np.ndarray) -> bool:
+    """One round of :func:`settle_edges` with every point's neighbours ``nb`` (n, k) within the
+    reach (``far``: none there); whether any point moved."""
     P = ctx.pre.points
     owner = seg.owner()
-    pts = np.arange(len(P))
-    _, other = _neighbour_owners(owner, pts, ctx, reach, ctx.tol.boundaries.neighbours)
+    other = np.where(far, -1, owner[nb])
     mask = (other >= 0) & (other != owner[:, None])
     if not mask.any():
         return False
-    pairs = np.unique(np.stack([other[mask], np.broadcast_to(pts[:, None], other.shape)[mask]], axis=1), axis=0)
+    # The distinct (segment, point) pairs, ordered by segment then point.
+    n = len(P)
+    key = np.unique(other[mask].astype(np.int64) * n + np.nonzero(mask)[0])
+    pairs = np.stack([key // n, key % n], axis=1)
     own, fit = _owned_distances(seg, P)
     d = np.empty(len(pairs))
     for j in np.unique(pairs[:, 0]):

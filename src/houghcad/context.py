@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .noise import CLEAN, NoisePolicy
 from .preprocess import Preprocessed
@@ -47,6 +48,11 @@ class Context:
         What the run does differently on a noisy cloud.
     local : bool
         Voting on a cluster (the splitting phase), not the whole cloud.
+    neighbors : ndarray (m, k) or None
+        A neighbour table for the axis votes, given (see :func:`neighbour_table`).
+    voting : ndarray (m,) or None
+        The points (global indices) of the vote under way, whose neighbour table among
+        themselves the axis votes read (:func:`neighbour_table`); None outside a vote.
     workers : Workers or None
         The run's forked workers (:class:`houghcad.parallel.Workers`), None outside a run.
     """
@@ -66,6 +72,7 @@ class Context:
     seed: int = 0
     local: bool = False
     neighbors: np.ndarray | None = None
+    voting: np.ndarray | None = None
     tol: Tolerances = field(default_factory=Tolerances)
     policy: NoisePolicy = CLEAN
     workers: Any = None
@@ -89,6 +96,31 @@ def threads(ctx: Context) -> int:
     forked worker, and when a batch runs one job per cloud beside others). Results do not depend
     on it."""
     return max(int(getattr(ctx.workers, "n_jobs", 1)), 1)
+
+
+#: The last table :func:`neighbour_table` built: [points, voting points' bytes, k, table].
+_TABLE: list = []
+
+
+def neighbour_table(ctx: Context) -> np.ndarray | None:
+    """The neighbour table (m, k) of the vote's points ``ctx.voting`` among themselves (positions
+    in it), which the axis votes read (:func:`houghcad.families.cylinder.axis_candidates`):
+    ``ctx.neighbors`` when given; None outside a vote.
+
+    Built on first read, not with the vote's context: of the families only the cylinders'
+    placements read it, and a forked worker that only evaluates peaks never needs it. The last
+    table is kept for the next read on the same points (a worker's next task on them)."""
+    if ctx.neighbors is not None or ctx.voting is None:
+        return ctx.neighbors
+    idx = ctx.voting
+    k = min(ctx.tol.recognition.neighbours, len(idx))
+    key = idx.tobytes()
+    if _TABLE and _TABLE[0] is ctx.pre.points and _TABLE[2] == k and _TABLE[1] == key:
+        return _TABLE[3]
+    P = ctx.pre.points[idx]
+    table = cKDTree(P).query(P, k=k, workers=threads(ctx))[1]
+    _TABLE[:] = [ctx.pre.points, key, k, table]
+    return table
 
 
 def points_in_patch(pre: Preprocessed, width: float) -> float:

@@ -361,10 +361,11 @@ class DirectionAccumulator:
         self.indices = adj.indices.astype(np.int64)
         self.n_cells = n_cells
 
-    def vote(self, dirs: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-        """Accumulator values, shape (n_cells,), from unit directions (k, 3)."""
-        _, a = self.tree.query(dirs)
-        _, b = self.tree.query(-dirs)
+    def vote(self, dirs: np.ndarray, weights: np.ndarray | None = None, workers: int = 1) -> np.ndarray:
+        """Accumulator values, shape (n_cells,), from unit directions (k, 3); ``workers``: the
+        nearest-cell queries' threads (the result does not depend on them)."""
+        _, a = self.tree.query(dirs, workers=workers)
+        _, b = self.tree.query(-dirs, workers=workers)
         w = None if weights is None else np.concatenate([weights, weights])
         return np.bincount(np.concatenate([a, b]), weights=w, minlength=self.n_cells).astype(np.float64)
 

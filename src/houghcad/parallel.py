@@ -39,8 +39,6 @@ EVALUATE_TASKS_PER_JOB = 3
 #: In a worker: the run's context at the fork and its families by name.
 _BASE: "tuple[Context, dict[str, Family]] | None" = None
 _SCALARS = (bool, int, float, str, np.integer, np.floating)
-#: In a worker: the last neighbour table built, keyed by its points and context.
-_VOTING: "tuple[tuple, Context] | None" = None
 
 
 def available_cores() -> int:
@@ -72,19 +70,13 @@ def _task(job: tuple[str, np.ndarray, list[str], dict[str, Any], Any]) -> Any:
     from .recognize import evaluate, propose, recognize, voting_context
     from .splitting import recognise_cluster
 
-    global _VOTING
     what, idx, names, overrides, extra = job
     assert _BASE is not None
     base, by_name = _BASE
     ctx = replace(base, **overrides)
     fams = [by_name[n] for n in names]
     if what in ("propose", "evaluate"):
-        # A family's vote and its peaks' evaluations read the same neighbour table: kept for the
-        # next task on the same points.
-        key = (idx.tobytes(), tuple(sorted(overrides.items())))
-        if _VOTING is None or _VOTING[0] != key:
-            _VOTING = (key, voting_context(idx, ctx))
-        vctx = _VOTING[1]
+        vctx = voting_context(idx, ctx)
         if what == "propose":
             return propose(fams[0], idx, vctx)
         return _swap_families([evaluate(fams[0], prim, idx, vctx, coarse) for prim, coarse in extra], _FamilyName)

@@ -7,7 +7,7 @@ parameter can be mapped back to the input's coordinates.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -126,6 +126,24 @@ class Preprocessed:
     normals_method: str
     reach: float = 0.0
     crease: np.ndarray | None = None
+    #: Neighbour tables read so far, by (k, radius) (see :meth:`neighbours_within`); not
+    #: carried over by ``dataclasses.replace``, which may change the points.
+    _tables: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def neighbours_within(self, k: int, radius: float, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """Each point's ``k`` nearest points within ``radius`` (standard units): their indices
+        (n, k) int32 (0 where there are fewer) and whether each is there (n, k) bool.
+
+        Read once per (k, radius) and kept: the passes that ask again (the adjacency of every
+        pass, each round of edge settling) read the same points at the same radius. A point's
+        row is what a query of that point alone gives."""
+        key = (int(k), float(radius))
+        if key not in self._tables:
+            n = len(self.points)
+            dist, nb = self.tree.query(self.points, k=min(int(k), n), distance_upper_bound=radius, workers=workers)
+            ok = np.isfinite(dist).reshape(n, -1)
+            self._tables[key] = (np.where(ok, nb.reshape(n, -1), 0).astype(np.int32), ok)
+        return self._tables[key]
 
 
 #: The 16-neighbour noise estimate (spacings) above which ``noise="auto"``
@@ -176,7 +194,7 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     # on grid-like sampling but 3 on random (Poisson) sampling.
     reach = float(np.median(dist[:, min(6, dist.shape[1] - 1)]))
 
-    R, x, nrm, s2 = _standard_frame(x, nrm)
+    R, x, nrm, s2 = _standard_frame(x, nrm, workers)
     tree = cKDTree(x)
     T = Similarity(center=center, R=R, scale=scale0 * s2)
     diag = float(np.linalg.norm(np.ptp(x, axis=0)))
@@ -357,7 +375,7 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
         noise = min(float(np.median(np.sqrt(np.maximum(ev[:, 0], 0)))), 1.6 * noise)
         used = f"pca-k{kk}"
     if method == "voting":
-        nrm = voting_normals(x, nbr, seed=seed)
+        nrm = voting_normals(x, nbr, seed=seed, workers=workers)
         used = "voting"
     elif method == "auto" and used == "pca" and hood.qres is not None and \
             not choose_policy(noise_policy, noise, hood.spacing).noisy:
@@ -372,12 +390,13 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
         on_crease = hood.qres > CREASE * hood.spacing
         crease = np.flatnonzero(on_crease)
         if len(crease):
-            nrm[crease] = voting_normals(x, nbr[crease], seed=seed, anchored=True)
+            nrm[crease] = voting_normals(x, nbr[crease], seed=seed, anchored=True, workers=workers)
             return nrm, dist, noise, used, on_crease
     return nrm, dist, noise, used, None
 
 
-def _standard_frame(x: np.ndarray, nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def _standard_frame(x: np.ndarray, nrm: np.ndarray, workers: int = 1) \
+        -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Most voted normal direction to z (the second one fixes x), then back into the unit cube.
 
     Parameters
@@ -395,7 +414,7 @@ def _standard_frame(x: np.ndarray, nrm: np.ndarray) -> tuple[np.ndarray, np.ndar
         The rescaling factor (the rotation changes the extents).
     """
     acc = direction_accumulator()
-    H = acc.smooth(acc.vote(nrm))
+    H = acc.smooth(acc.vote(nrm, workers=workers))
     dirs, _ = acc.peaks(H, min_persistence=0.05, max_peaks=2)
     d = refine_direction(dirs[0], nrm, np.radians(5.0))
     hint = None

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .context import Context, threads
+from .context import Context
 from .families import Family, Primitive
 from .hough import Grid, accumulate, persistent_peaks, smooth
 from .state import Candidate, SegmentRecord, Segmentation, mean_fitting_error
@@ -447,11 +447,10 @@ def candidates(idx: np.ndarray, families: list[Family], ctx: Context, avail: np.
 
 
 def voting_context(idx: np.ndarray, ctx: Context) -> Context:
-    """``ctx`` with the neighbour table (m, k) of the points ``idx`` among themselves, which
-    the axis votes read (:func:`houghcad.families.cylinder.axis_candidates`, also inside the
-    complex families' fits)."""
-    k = min(ctx.tol.recognition.neighbours, len(idx))
-    return replace(ctx, neighbors=cKDTree(ctx.pre.points[idx]).query(ctx.pre.points[idx], k=k, workers=threads(ctx))[1])
+    """``ctx`` for a vote on the points ``idx`` (global indices): the axis votes read their
+    neighbour table among themselves (:func:`houghcad.context.neighbour_table`, built when first
+    read)."""
+    return replace(ctx, voting=idx)
 
 
 def refine(seg: Segmentation, families: list[Family], ctx: Context) -> None:

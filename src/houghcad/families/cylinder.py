@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from ..context import neighbour_table
 from ..hough import Grid, direction_accumulator, normal_line_peaks, refine_direction
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Placement, Primitive, gauss_newton, axial, radial, register, tangent_basis, unit
@@ -20,7 +21,7 @@ def axis_candidates(P, N, ctx, max_dirs):
     if ctx.local:
         # A cluster's own estimate: the direction least represented among the normals.
         out.append(np.linalg.eigh(N.T @ N)[1][:, 0])
-    nb = ctx.neighbors
+    nb = neighbour_table(ctx)
     if nb is None or len(nb) != len(P) or nb.shape[1] < 4:
         return out
     k = nb.shape[1]
