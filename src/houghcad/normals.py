@@ -90,6 +90,69 @@ def _scatter(points: np.ndarray, neighbors: np.ndarray) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=True, nogil=True)
+def _quadric_system(points: np.ndarray, neighbors: np.ndarray, frames: np.ndarray) \
+        -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each row's height-field quadric fit in its PCA frame ``frames`` (m, 3, 3), columns the
+    axes, the normal first: heights h (m, k), design A (m, k, 6) of the terms x², xy, y², x, y,
+    1, normal matrix AᵀA with a 1e-9 trace ridge (m, 6, 6) and Aᵀh (m, 6). Summed in numpy's
+    order (see :func:`_scatter`)."""
+    m, k = neighbors.shape
+    h = np.empty((m, k))
+    A = np.empty((m, k, 6))
+    M = np.empty((m, 6, 6))
+    rhs = np.empty((m, 6))
+    u = np.empty(3)
+    for r in range(m):
+        c0 = 0.0
+        c1 = 0.0
+        c2 = 0.0
+        for t in range(k):
+            p = neighbors[r, t]
+            c0 += points[p, 0]
+            c1 += points[p, 1]
+            c2 += points[p, 2]
+        c0 /= k
+        c1 /= k
+        c2 /= k
+        for t in range(k):
+            p = neighbors[r, t]
+            a0 = points[p, 0] - c0
+            a1 = points[p, 1] - c1
+            a2 = points[p, 2] - c2
+            for j in range(3):
+                acc = 0.0
+                acc += a0 * frames[r, 0, j]
+                acc += a1 * frames[r, 1, j]
+                acc += a2 * frames[r, 2, j]
+                u[j] = acc
+            x, y = u[2], u[1]
+            h[r, t] = u[0]
+            A[r, t, 0] = x * x
+            A[r, t, 1] = x * y
+            A[r, t, 2] = y * y
+            A[r, t, 3] = x
+            A[r, t, 4] = y
+            A[r, t, 5] = 1.0
+        for i in range(6):
+            for j in range(6):
+                acc = 0.0
+                for t in range(k):
+                    acc += A[r, t, i] * A[r, t, j]
+                M[r, i, j] = acc
+            acc = 0.0
+            for t in range(k):
+                acc += A[r, t, i] * h[r, t]
+            rhs[r, i] = acc
+        tr = 0.0
+        for i in range(6):
+            tr += M[r, i, i]
+        ridge = 1e-9 * tr
+        for i in range(6):
+            M[r, i, i] += ridge
+    return h, A, M, rhs
+
+
 def by_rows(fn: Callable[[slice], T], n: int, workers: int = 1, rows: int = ROWS) -> list[T]:
     """``fn`` over the chunks of ``rows`` consecutive rows of ``n``, on ``workers`` threads, in
     order. The chunks do not depend on ``workers``: neither does the result."""
@@ -121,16 +184,11 @@ def quadric_residuals(points: np.ndarray, neighbors: np.ndarray, workers: int = 
     P = np.ascontiguousarray(points, dtype=np.float64)
 
     def fit(rows: slice) -> np.ndarray:
-        nb = points[neighbors[rows]]
-        nb = nb - nb.mean(axis=1, keepdims=True)
-        _, v = np.linalg.eigh(_scatter(P, neighbors[rows]))
-        u = np.einsum("nki,nij->nkj", nb, v)
-        h, a, b = u[..., 0], u[..., 2], u[..., 1]
-        A = np.stack([a * a, a * b, b * b, a, b, np.ones_like(a)], axis=2)
-        M = np.einsum("nki,nkj->nij", A, A)
-        ridge = 1e-9 * np.einsum("nii->n", M)[:, None, None] * np.eye(6)
-        c = np.linalg.solve(M + ridge, np.einsum("nki,nk->ni", A, h)[..., None])[..., 0]
-        r = h - np.einsum("nki,ni->nk", A, c)
+        nbr = neighbors[rows]
+        _, v = np.linalg.eigh(_scatter(P, nbr))
+        h, A, M, rhs = _quadric_system(P, nbr, v)
+        c = np.linalg.solve(M, rhs[..., None])[..., 0]
+        r = h - np.einsum("nki,ni->nk", A, c)  # numpy's: its sum over the six terms is vectorised
         return np.sqrt((r**2).mean(axis=1))
 
     return np.concatenate(by_rows(fit, len(neighbors), workers))
