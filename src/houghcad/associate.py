@@ -39,17 +39,17 @@ from scipy.sparse.csgraph import connected_components
 
 from .families.base import Family, Frame, Primitive, regular_indices, unit
 from .adjacency import SegmentGraph
-from .bridges import bridged
+from .bridges import ROW_PERCENTILES, ROW_POINTS, bridged
 from .state import SegmentView
 from .tolerances import AssociationTolerances
 
 __all__ = ["Associator", "Item", "RawGroup", "extent", "pivot"]
 
-#: Extents span the central share of the points between these percentiles: a
-#: few edge points a segment took from its neighbour do not change them.
-EXTENT_PERCENTILES = (2.5, 97.5)
-#: Points an extent is computed on at most (a regular subsample).
-EXTENT_POINTS = 2000
+#: Extents span the central share of the points, read on a regular subsample, as a row's width
+#: does (:mod:`houghcad.bridges`): a few edge points a segment took from its neighbour do not
+#: change them.
+EXTENT_PERCENTILES = ROW_PERCENTILES
+EXTENT_POINTS = ROW_POINTS
 #: Stands for an infinite dissimilarity in the linkage.
 _FAR = 1e9
 #: Integer descriptors are equal or not at all.
