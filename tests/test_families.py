@@ -303,3 +303,38 @@ def test_cone_sweep_votes_match_the_arctangent_definition():
     ref = np.zeros_like(H)
     np.add.at(ref, (np.broadcast_to(np.arange(len(b)), dz.shape)[ok], x[ok].astype(int)), 1.0)
     np.testing.assert_array_equal(H, ref)
+
+
+def test_cylinder_refit_is_the_damped_gauss_newton_of_its_residuals():
+    """The cylinder's refit, by hand in numba, lands where the shared Gauss–Newton solver does on
+    the same residuals and Jacobian (to rounding: their sums differ in the last bits)."""
+    from houghcad.families.base import gauss_newton, tangent_basis, unit
+
+    rng = np.random.default_rng(5)
+    fam = REGISTRY["cylinder"]
+    for _ in range(20):
+        ax = unit(rng.normal(size=3))
+        e1, e2 = tangent_basis(ax)
+        r = rng.uniform(0.05, 0.5)
+        th, z = rng.uniform(0, rng.uniform(1.0, 6.28), 300), rng.uniform(-0.3, 0.3, 300)
+        c = 0.1 * rng.normal(size=3)
+        P = c + r * (np.cos(th)[:, None] * e1 + np.sin(th)[:, None] * e2) + z[:, None] * ax \
+            + 0.002 * rng.normal(size=(300, 3))
+        a0, p0 = unit(ax + 0.05 * rng.normal(size=3)), c + 0.02 * rng.normal(size=3)
+        got = fam.fit(Primitive("cylinder", {"axis": a0, "axis_point": p0, "radius": 1.1 * r}), P, None)
+        f1, f2 = tangent_basis(a0)
+
+        def fun(x):
+            a = unit(a0 + x[0] * f1 + x[1] * f2)
+            v = P - (p0 + x[2] * f1 + x[3] * f2)
+            h = v @ a
+            w = v - h[:, None] * a
+            rho = np.linalg.norm(w, axis=1)
+            u = w / rho[:, None]
+            return rho - x[4], np.stack([-h * (u @ f1), -h * (u @ f2), -(u @ f1), -(u @ f2), -np.ones(len(P))], 1)
+
+        x = gauss_newton(fun, np.array([0, 0, 0, 0, 1.1 * r]))
+        a = unit(a0 + x[0] * f1 + x[1] * f2)
+        assert abs(got.params["radius"] - abs(x[4])) < 1e-8
+        assert np.abs(got.params["axis"] - a).max() < 1e-8
+        assert abs(got.params["radius"] - r) < 0.01  # and it fits the cylinder
