@@ -338,3 +338,33 @@ def test_cylinder_refit_is_the_damped_gauss_newton_of_its_residuals():
         assert abs(got.params["radius"] - abs(x[4])) < 1e-8
         assert np.abs(got.params["axis"] - a).max() < 1e-8
         assert abs(got.params["radius"] - r) < 0.01  # and it fits the cylinder
+
+
+@pytest.mark.parametrize("name, npar", [("cone", 6), ("torus", 7)])
+def test_refit_rows_are_the_residuals_and_their_derivatives(name, npar):
+    """The cone's and the torus's refit residuals, written in numba, are the distances their
+    surface gives at the turned parameters, and their Jacobian is the residuals' derivative
+    (central differences); so scipy's Levenberg–Marquardt sees the same problem as before."""
+    from importlib import import_module
+
+    from houghcad.families.base import axial, tangent_basis, unit
+
+    rows = import_module(f"houghcad.families.{name}")._refit_rows
+    rng = np.random.default_rng(11)
+    for _ in range(10):
+        P = rng.normal(size=(200, 3))
+        q0, a0 = 0.1 * rng.normal(size=3), unit(rng.normal(size=3))
+        e1, e2 = tangent_basis(a0)
+        x = np.r_[0.05 * rng.normal(size=5), rng.uniform(0.3, 0.9), rng.uniform(0.1, 0.3)][:npar]
+        r, J = rows(P, q0, a0, e1, e2, x, True)
+        a = unit(a0 + x[3] * e1 + x[4] * e2)
+        h, rho = axial(P, q0 + x[:3], a)
+        ref = rho * np.cos(x[5]) - h * np.sin(x[5]) if name == "cone" else np.hypot(rho - x[5], h) - x[6]
+        np.testing.assert_allclose(r, ref, atol=1e-12)
+        assert rows(P, q0, a0, e1, e2, x, False)[1].shape == (0, npar)
+        step = 1e-6
+        for k in range(npar):
+            d = np.zeros(npar)
+            d[k] = step
+            fd = (rows(P, q0, a0, e1, e2, x + d, False)[0] - rows(P, q0, a0, e1, e2, x - d, False)[0]) / (2 * step)
+            np.testing.assert_allclose(J[:, k], fd, atol=1e-6)

@@ -71,6 +71,23 @@ def _axial(P, point, axis):
     return h, rho
 
 
+@numba.njit(cache=True)
+def turned_axis(a0, e1, e2, x1, x2):
+    """The axis ``unit(b)``, b = a0 + x1 e1 + x2 e2, of a refit that turns the axis a0 by two
+    tangent parameters, and its derivatives U (3, 2) along e1 and e2 (as
+    :func:`unit_derivatives`), for the families' refits written in numba."""
+    b = a0 + x1 * e1 + x2 * e2
+    nb = np.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
+    a = b / nb
+    d1 = e1[0] * a[0] + e1[1] * a[1] + e1[2] * a[2]
+    d2 = e2[0] * a[0] + e2[1] * a[1] + e2[2] * a[2]
+    U = np.empty((3, 2))
+    for j in range(3):
+        U[j, 0] = (e1[j] - d1 * a[j]) / nb
+        U[j, 1] = (e2[j] - d2 * a[j]) / nb
+    return a, U
+
+
 def lines_intersection(P: np.ndarray, D: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Least-squares point closest to lines x = P_i + t D_i (unit D).
 

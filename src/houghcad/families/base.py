@@ -46,6 +46,7 @@ from ._geometry import (  # noqa: F401
     radial,
     regular_indices,
     tangent_basis,
+    turned_axis,
     unit,
     unit_derivatives,
 )

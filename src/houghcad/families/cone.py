@@ -12,7 +12,7 @@ from scipy.optimize import least_squares
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, axial, radial,
-                   register, swept_votes, tangent_basis, unit, unit_derivatives)
+                   register, swept_votes, tangent_basis, turned_axis, unit)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
 
 
@@ -150,30 +150,17 @@ class Cone(Family):
     def fit(self, prim, P, N):
         p0, a0, al0 = prim.params["apex"], unit(prim.params["axis"]), prim.params["half_angle"]
         e1, e2 = tangent_basis(a0)
+        P = np.ascontiguousarray(P, dtype=np.float64)
+        p0 = np.asarray(p0, np.float64)
 
         def unpack(x):
             return p0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5]
 
         def res(x):
-            p, a, al = unpack(x)
-            h, rho = axial(P, p, a)
-            return rho * np.cos(al) - h * np.sin(al)
+            return _refit_rows(P, p0, a0, e1, e2, x, False)[0]
 
         def jac(x):
-            # Analytic: finite differences cost six more residual evaluations
-            # per step, and the cone fit runs in every cluster's vote.
-            p, a, al = unpack(x)
-            v = P - p
-            h, rho, e = radial(P, p, a)
-            ca, sa = np.cos(al), np.sin(al)
-            J = np.empty((len(P), 6))
-            J[:, :3] = -ca * e + sa * a  # d/d apex: dh = -a, drho = -e
-            # d/d axis: dh/da = v, drho/da = -h v / rho; a = unit(b) with
-            # b = a0 + x3 e1 + x4 e2 (base.unit_derivatives).
-            g = -v * (h * ca / np.maximum(rho, 1e-15) + sa)[:, None]
-            J[:, 3:5] = g @ unit_derivatives(a0 + x[3] * e1 + x[4] * e2, (e1, e2))
-            J[:, 5] = -rho * sa - h * ca
-            return J
+            return _refit_rows(P, p0, a0, e1, e2, x, True)[1]
 
         try:
             sol = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], jac=jac, method="lm", max_nfev=40)
@@ -196,6 +183,39 @@ class Cone(Family):
 
     def frame(self, prim):
         return Frame("point", np.asarray(prim.params["apex"], float), unit(prim.params["axis"]), oriented=True)
+
+
+# The refit's residuals and analytic Jacobian in numba: scipy's Levenberg–Marquardt asks for them
+# 10–40 times a refit, in every cluster's vote, and numpy's per-call overhead on a few hundred
+# points was most of the refit's time. Finite differences would cost six residuals more a step.
+@numba.njit(cache=True)
+def _refit_rows(P, p0, a0, e1, e2, x, jacobian):
+    """Residuals r = ρ cos α − h sin α (n,) of the points P (n, 3) about the cone with apex
+    p0 + x[:3], axis unit(a0 + x3 e1 + x4 e2) and half-angle x5, and, when ``jacobian``, their
+    derivatives J (n, 6) (else an empty (0, 6)): d/d apex = −cos α e + sin α a (dh = −a,
+    dρ = −e, e the radial unit vector); d/d axis through dh/da = v, dρ/da = −h v / ρ."""
+    a, U = turned_axis(a0, e1, e2, x[3], x[4])
+    p = p0 + x[:3]
+    ca, sa = np.cos(x[5]), np.sin(x[5])
+    n = P.shape[0]
+    r = np.empty(n)
+    J = np.empty((n if jacobian else 0, 6))
+    for i in range(n):
+        v0, v1, v2 = P[i, 0] - p[0], P[i, 1] - p[1], P[i, 2] - p[2]
+        h = v0 * a[0] + v1 * a[1] + v2 * a[2]
+        w0, w1, w2 = v0 - h * a[0], v1 - h * a[1], v2 - h * a[2]
+        rho = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        r[i] = rho * ca - h * sa
+        if jacobian:
+            s = rho if rho > 1e-15 else 1.0
+            J[i, 0] = -ca * w0 / s + sa * a[0]
+            J[i, 1] = -ca * w1 / s + sa * a[1]
+            J[i, 2] = -ca * w2 / s + sa * a[2]
+            f = -(h * ca / max(rho, 1e-15) + sa)
+            J[i, 3] = f * (v0 * U[0, 0] + v1 * U[1, 0] + v2 * U[2, 0])
+            J[i, 4] = f * (v0 * U[0, 1] + v1 * U[1, 1] + v2 * U[2, 1])
+            J[i, 5] = -rho * sa - h * ca
+    return r, J
 
 
 # By hand in numba: gamma's (n, bins) samples are 200 MB per 100k points, and voting them

@@ -12,7 +12,7 @@ from scipy.optimize import least_squares
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, axial, radial, register, swept_votes,
-                   tangent_basis, unit, unit_derivatives)
+                   tangent_basis, turned_axis, unit)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 
@@ -176,32 +176,18 @@ class Torus(Family):
         return 0.5 * ctx.tau <= p["minor_radius"] < ctx.max_radius and 0 <= p["major_radius"] < ctx.max_radius
 
     def fit(self, prim, P, N):
-        c0, a0 = prim.params["center"], unit(prim.params["axis"])
+        c0, a0 = np.asarray(prim.params["center"], np.float64), unit(prim.params["axis"])
         e1, e2 = tangent_basis(a0)
+        P = np.ascontiguousarray(P, dtype=np.float64)
 
         def unpack(x):
             return c0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5], x[6]
 
         def res(x):
-            c, a, R, r = unpack(x)
-            h, rho = axial(P, c, a)
-            return np.hypot(rho - R, h) - r
+            return _refit_rows(P, c0, a0, e1, e2, x, False)[0]
 
         def jac(x):
-            # Analytic (see Cone.fit): with D the distance to the tube's
-            # centre circle, dD/drho = (rho - R) / D and dD/dh = h / D.
-            c, a, R, r = unpack(x)
-            v = P - c
-            h, rho, e = radial(P, c, a)
-            D = np.maximum(np.hypot(rho - R, h), 1e-15)
-            dr, dh = (rho - R) / D, h / D
-            J = np.empty((len(P), 7))
-            J[:, :3] = -dr[:, None] * e - dh[:, None] * a  # d/d centre: dh = -a, drho = -e
-            g = v * (dh * R / np.maximum(rho, 1e-15))[:, None]  # dh/da = v, drho/da = -h v / rho
-            J[:, 3:5] = g @ unit_derivatives(a0 + x[3] * e1 + x[4] * e2, (e1, e2))
-            J[:, 5] = -dr
-            J[:, 6] = -1.0
-            return J
+            return _refit_rows(P, c0, a0, e1, e2, x, True)[1]
 
         x0 = np.r_[0, 0, 0, 0, 0, prim.params["major_radius"], prim.params["minor_radius"]]
         try:
@@ -226,6 +212,45 @@ class Torus(Family):
 
     def frame(self, prim):
         return Frame("point", np.asarray(prim.params["center"], float), unit(prim.params["axis"]))
+
+
+# The refit's residuals and analytic Jacobian in numba, as the cone's (cone._refit_rows): scipy's
+# Levenberg–Marquardt asks for them up to 50 times a refit, and numpy's per-call overhead on a
+# few hundred points was most of the refit's time.
+@numba.njit(cache=True)
+def _refit_rows(P, c0, a0, e1, e2, x, jacobian):
+    """Residuals r = D − x6 (n,) of the points P (n, 3) about the torus with centre c0 + x[:3],
+    axis unit(a0 + x3 e1 + x4 e2), major radius x5 and minor radius x6, where D = hypot(ρ − R, h)
+    is the distance to the tube's centre circle; and, when ``jacobian``, their derivatives J (n, 7)
+    (else an empty (0, 7)), with dD/dρ = (ρ − R) / D and dD/dh = h / D."""
+    a, U = turned_axis(a0, e1, e2, x[3], x[4])
+    c = c0 + x[:3]
+    R, rr = x[5], x[6]
+    n = P.shape[0]
+    r = np.empty(n)
+    J = np.empty((n if jacobian else 0, 7))
+    for i in range(n):
+        v0, v1, v2 = P[i, 0] - c[0], P[i, 1] - c[1], P[i, 2] - c[2]
+        h = v0 * a[0] + v1 * a[1] + v2 * a[2]
+        w0, w1, w2 = v0 - h * a[0], v1 - h * a[1], v2 - h * a[2]
+        rho = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        D0 = np.hypot(rho - R, h)
+        r[i] = D0 - rr
+        if jacobian:
+            s = rho if rho > 1e-15 else 1.0
+            D = max(D0, 1e-15)
+            dr, dh = (rho - R) / D, h / D
+            # d/d centre: dh = −a, dρ = −e (e the radial unit vector)
+            J[i, 0] = -dr * w0 / s - dh * a[0]
+            J[i, 1] = -dr * w1 / s - dh * a[1]
+            J[i, 2] = -dr * w2 / s - dh * a[2]
+            # d/d axis: dh/da = v, dρ/da = −h v / ρ, so dD/da = v (h / D) R / ρ
+            f = dh * R / max(rho, 1e-15)
+            J[i, 3] = f * (v0 * U[0, 0] + v1 * U[1, 0] + v2 * U[2, 0])
+            J[i, 4] = f * (v0 * U[0, 1] + v1 * U[1, 1] + v2 * U[2, 1])
+            J[i, 5] = -dr
+            J[i, 6] = -1.0
+    return r, J
 
 
 # By hand in numba: gamma's (n, bins) samples are held whole and then voted.
