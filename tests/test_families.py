@@ -368,3 +368,59 @@ def test_refit_rows_are_the_residuals_and_their_derivatives(name, npar):
             d[k] = step
             fd = (rows(P, q0, a0, e1, e2, x + d, False)[0] - rows(P, q0, a0, e1, e2, x - d, False)[0]) / (2 * step)
             np.testing.assert_allclose(J[:, k], fd, atol=1e-6)
+
+
+def _misaligned_copies(P):
+    """Copies of P (n, 3) starting at each of 8 byte offsets of a float64 buffer."""
+    out = []
+    for off in range(8):
+        buf = np.zeros(P.size + 8)
+        v = buf[off:off + P.size].reshape(P.shape)
+        v[:] = P
+        out.append(v)
+    return out
+
+
+@pytest.mark.parametrize("name", ["cone", "torus"])
+def test_refit_is_the_same_bits_whatever_the_memory_alignment(name):
+    """The cone's and torus's refits give the same bits for the same points wherever they sit in
+    memory, and land on the surface. (scipy's MINPACK, used before, did not on an ill-conditioned
+    cone of a real cloud, 44 points with the apex far off, so a run's worker and main processes
+    disagreed; this synthetic case does not reach that, it guards the sums' order.)"""
+    rng = np.random.default_rng(3)
+    fam = REGISTRY[name]
+    if name == "cone":
+        # A nearly cylindrical cone: half-angle 0.02 rad, apex about 25 radii away.
+        h = rng.uniform(0.0, 1.0, 300)
+        th = rng.uniform(0, 2 * np.pi, 300)
+        rad = (25.0 + h) * np.tan(0.02)
+        P = np.column_stack([rad * np.cos(th), rad * np.sin(th), 25.0 + h])
+        start = Primitive("cone", {"apex": np.array([0.01, -0.01, 0.3]), "axis": np.array([0.01, 0.0, 1.0]),
+                                   "half_angle": 0.025})
+        key = "half_angle"
+        true = 0.02
+    else:
+        u, v = rng.uniform(0, 2 * np.pi, (2, 400))
+        P = np.column_stack([(0.6 + 0.2 * np.cos(v)) * np.cos(u), (0.6 + 0.2 * np.cos(v)) * np.sin(u),
+                             0.2 * np.sin(v)])
+        start = Primitive("torus", {"center": np.array([0.01, 0.02, -0.01]), "axis": np.array([0.02, 0.0, 1.0]),
+                                    "major_radius": 0.62, "minor_radius": 0.18})
+        key = "minor_radius"
+        true = 0.2
+    fits = [fam.fit(start, Q, None) for Q in _misaligned_copies(P)]
+    for f in fits[1:]:
+        for k, val in fits[0].params.items():
+            np.testing.assert_array_equal(np.asarray(f.params[k]), np.asarray(val))
+    assert abs(fits[0].params[key] - true) < 1e-3
+    assert fam.distance(fits[0], P).max() < 1e-3
+
+
+def test_normal_equations_are_the_sums_of_the_rows():
+    from houghcad.families.base import normal_equations
+
+    rng = np.random.default_rng(4)
+    r, J = rng.normal(size=50), rng.normal(size=(50, 6))
+    cost, A, g = normal_equations(r, J)
+    assert np.isclose(cost, r @ r)
+    np.testing.assert_allclose(A, J.T @ J, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(g, J.T @ r, rtol=1e-12, atol=1e-12)

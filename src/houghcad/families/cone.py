@@ -7,13 +7,17 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, axial, radial,
-                   register, swept_votes, tangent_basis, turned_axis, unit)
+                   levenberg_marquardt, normal_equations, register, swept_votes, tangent_basis, turned_axis,
+                   unit)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
+
+#: Evaluations of a refit's Levenberg–Marquardt at most: six parameters from a voted cone near the answer
+#: (scipy's MINPACK had the same budget).
+REFIT_EVALUATIONS = 40
 
 
 def cone_frame(P, N):
@@ -156,20 +160,16 @@ class Cone(Family):
         def unpack(x):
             return p0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5]
 
-        def res(x):
-            return _refit_rows(P, p0, a0, e1, e2, x, False)[0]
+        def system(x):
+            return normal_equations(*_refit_rows(P, p0, a0, e1, e2, x, True))
 
-        def jac(x):
-            return _refit_rows(P, p0, a0, e1, e2, x, True)[1]
-
-        try:
-            sol = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], jac=jac, method="lm", max_nfev=40)
-        except Exception:
+        x = levenberg_marquardt(system, np.r_[0, 0, 0, 0, 0, al0], REFIT_EVALUATIONS)
+        if x is None:
             return None
-        p, a, al = unpack(sol.x)
+        p, a, al = unpack(x)
         if not (0 < al < np.pi / 2):
             return None
-        if np.mean((P - p) @ a) < 0:
+        if axial(P, p, a)[0].mean() < 0:
             a = -a
         return Primitive("cone", {"apex": p, "axis": a, "half_angle": float(al)})
 
