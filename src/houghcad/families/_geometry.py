@@ -261,25 +261,24 @@ def gauss_newton(fun, x0: np.ndarray, iters: int = 8, tol: float = 1e-12) -> np.
 
     Hand-written because the families' analytic Jacobians make a few
     iterations cost microseconds, where a generic solver's overhead dominates.
+    Its sums and solves run in scalar loops (:func:`normal_equations`,
+    :func:`damped_step`), the same bits wherever the arrays sit in memory.
     """
     x = np.asarray(x0, float)
     r, J = fun(x)
-    cost = r @ r
+    cost, A, g = normal_equations(np.ascontiguousarray(r, np.float64), np.ascontiguousarray(J, np.float64))
     lam = 1e-6
     for _ in range(iters):
-        A = J.T @ J
-        g = J.T @ r
-        try:
-            step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-15), -g)
-        except np.linalg.LinAlgError:
+        step, ok = damped_step(A, g, lam, np.diag(A) + 1e-15)
+        if not ok:
             return None
         xn = x + step
         rn, Jn = fun(xn)
-        cn = rn @ rn
+        cn, An, gn = normal_equations(np.ascontiguousarray(rn, np.float64), np.ascontiguousarray(Jn, np.float64))
         if not np.isfinite(cn):
             return None
         if cn <= cost:
-            x, r, J, cost = xn, rn, Jn, cn
+            x, A, g, cost = xn, An, gn, cn
             lam = max(lam / 10, 1e-12)
             if np.abs(step).max() < tol:
                 break

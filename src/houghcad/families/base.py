@@ -39,6 +39,7 @@ from ..preprocess import Similarity
 from ._geometry import (  # noqa: F401
     axial,
     axis_from_normal_lines,
+    damped_step,
     frame_turn_rows,
     gauss_newton,
     levenberg_marquardt,

@@ -11,7 +11,7 @@ import numpy as np
 from ..context import neighbour_table
 from ..hough import Grid, direction_accumulator, normal_line_peaks, refine_direction
 from ..preprocess import rotation_to_z
-from .base import Frame, Family, Placement, Primitive, axial, radial, register, tangent_basis, unit
+from .base import Frame, Family, Placement, Primitive, axial, damped_step, radial, register, tangent_basis, unit
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 
@@ -80,12 +80,11 @@ def _gauss_newton_fit(P, a0, p0, e1, e2, r0):
     cost, A, g = _normal_equations(P, a0, p0, e1, e2, x)
     lam = 1e-6
     for _ in range(8):
-        M = A.copy()
+        D = np.empty(5)
         for j in range(5):
-            M[j, j] += lam * (A[j, j] + 1e-15)
-        try:
-            step = np.linalg.solve(M, -g)
-        except Exception:
+            D[j] = A[j, j] + 1e-15
+        step, ok = damped_step(A, g, lam, D)
+        if not ok:
             return None
         xn = x + step
         cn, An, gn = _normal_equations(P, a0, p0, e1, e2, xn)
