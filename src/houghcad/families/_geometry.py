@@ -57,17 +57,24 @@ def axial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarra
 # One pass in numba instead of four numpy temporaries: this runs on every candidate's points
 # (a whole-cloud round evaluates hundreds of axes over 10^5 points). Written out in scalar
 # arithmetic, it also gives the same bits on every CPU, where BLAS's dot kernels differ.
+@numba.njit(cache=True, inline="always")
+def axial_row(P, i, point, axis):
+    """Point i of P (n, 3) about the axis through ``point`` (unit ``axis``): its offset
+    (v0, v1, v2) from ``point``, axial coordinate h, radial offset (w0, w1, w2) and radial
+    distance rho, in scalar arithmetic (numba)."""
+    v0, v1, v2 = P[i, 0] - point[0], P[i, 1] - point[1], P[i, 2] - point[2]
+    h = v0 * axis[0] + v1 * axis[1] + v2 * axis[2]
+    w0, w1, w2 = v0 - h * axis[0], v1 - h * axis[1], v2 - h * axis[2]
+    return v0, v1, v2, h, w0, w1, w2, np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+
+
 @numba.njit(cache=True)
 def _axial(P, point, axis):
     n = P.shape[0]
     h = np.empty(n)
     rho = np.empty(n)
     for i in range(n):
-        d0, d1, d2 = P[i, 0] - point[0], P[i, 1] - point[1], P[i, 2] - point[2]
-        t = d0 * axis[0] + d1 * axis[1] + d2 * axis[2]
-        v0, v1, v2 = d0 - t * axis[0], d1 - t * axis[1], d2 - t * axis[2]
-        h[i] = t
-        rho[i] = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        _, _, _, h[i], _, _, _, rho[i] = axial_row(P, i, point, axis)
     return h, rho
 
 

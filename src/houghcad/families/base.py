@@ -38,6 +38,7 @@ from ..hough import Grid
 from ..preprocess import Similarity
 from ._geometry import (  # noqa: F401
     axial,
+    axial_row,
     axis_from_normal_lines,
     damped_step,
     frame_turn_rows,

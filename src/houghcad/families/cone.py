@@ -11,7 +11,7 @@ import numpy as np
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, axial, radial,
-                   levenberg_marquardt, normal_equations, register, swept_votes, tangent_basis, turned_axis,
+                   axial_row, levenberg_marquardt, normal_equations, register, swept_votes, tangent_basis, turned_axis,
                    unit)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
 
@@ -201,10 +201,7 @@ def _refit_rows(P, p0, a0, e1, e2, x, jacobian):
     r = np.empty(n)
     J = np.empty((n if jacobian else 0, 6))
     for i in range(n):
-        v0, v1, v2 = P[i, 0] - p[0], P[i, 1] - p[1], P[i, 2] - p[2]
-        h = v0 * a[0] + v1 * a[1] + v2 * a[2]
-        w0, w1, w2 = v0 - h * a[0], v1 - h * a[1], v2 - h * a[2]
-        rho = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        v0, v1, v2, h, w0, w1, w2, rho = axial_row(P, i, p, a)
         r[i] = rho * ca - h * sa
         if jacobian:
             s = rho if rho > 1e-15 else 1.0

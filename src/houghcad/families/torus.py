@@ -11,7 +11,7 @@ import numpy as np
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, axial, radial, register, swept_votes,
-                   levenberg_marquardt, normal_equations, tangent_basis, turned_axis, unit)
+                   axial_row, levenberg_marquardt, normal_equations, tangent_basis, turned_axis, unit)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 #: Evaluations of a refit's Levenberg–Marquardt at most: seven parameters from a voted torus near the answer
@@ -229,10 +229,7 @@ def _refit_rows(P, c0, a0, e1, e2, x, jacobian):
     r = np.empty(n)
     J = np.empty((n if jacobian else 0, 7))
     for i in range(n):
-        v0, v1, v2 = P[i, 0] - c[0], P[i, 1] - c[1], P[i, 2] - c[2]
-        h = v0 * a[0] + v1 * a[1] + v2 * a[2]
-        w0, w1, w2 = v0 - h * a[0], v1 - h * a[1], v2 - h * a[2]
-        rho = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        v0, v1, v2, h, w0, w1, w2, rho = axial_row(P, i, c, a)
         D0 = np.hypot(rho - R, h)
         r[i] = D0 - rr
         if jacobian:
