@@ -697,3 +697,19 @@ def test_groups_table():
     assert lines[3].split()[:4] == ["0", "parallel", "0,", "1"] and lines[3].endswith("2 cylinders with parallel axes")
     table = summary_table(res)
     assert table.index("unsegmented") < table.index("translation") < table.index("time")
+
+
+def test_the_command_skips_the_final_garbage_collection(monkeypatch):
+    """`houghcad` (cli.run) returns main's exit code and freezes the collected objects, so the
+    interpreter's exit does not walk them; main itself, called in long-lived processes, does not."""
+    import gc
+
+    from houghcad import cli
+
+    monkeypatch.setattr(cli, "main", lambda argv=None: 2)
+    before = gc.get_freeze_count()
+    try:
+        assert cli.run() == 2
+        assert gc.get_freeze_count() > before
+    finally:
+        gc.unfreeze()
