@@ -52,6 +52,15 @@ def _wall(cmd: list[str]) -> float:
     return time.perf_counter() - t
 
 
+def _exit_seconds(cmd_args: list[str]) -> float:
+    """Seconds from the end of the ``houghcad`` command's work (cli.run returning) to the end of
+    its process: the interpreter's finalization."""
+    code = ("import sys, time; from houghcad.cli import run; sys.argv = ['houghcad'] + sys.argv[1:]; "
+            "c = run(); print(time.time(), flush=True); sys.exit(c)")
+    proc = subprocess.run([sys.executable, "-c", code, *cmd_args], check=True, capture_output=True, text=True)
+    return time.time() - float(proc.stdout.split()[-1])
+
+
 def _own_import_seconds() -> float:
     """Self import time (s) of houghcad's modules when the CLI is imported (-X importtime)."""
     proc = subprocess.run([sys.executable, "-X", "importtime", "-c", HOUGHCAD], check=True,
@@ -87,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         for _ in range(a.repeat):
             wall = _wall([py, "-m", "houghcad", "segment", str(xyz), "-o", str(out), "--quiet"])
             runs.append((wall, json.loads(out.read_text())["timing"]["total"]))
+        exit_s = med(lambda: _exit_seconds(["segment", str(xyz), "-o", str(out), "--quiet"]))
         wall = float(np.median([r[0] for r in runs]))
         work = float(np.median([r[1] for r in runs]))
     rows = [("`python -c pass` (the interpreter)", interpreter),
@@ -95,7 +105,8 @@ def main(argv: list[str] | None = None) -> int:
             ("of which houghcad's own modules (self import time, `-X importtime`)", own),
             ("numba's first call in a process (cached code loaded)", first_call),
             ("`houghcad segment` of 1,000 points, whole process", wall),
-            ("of which the segmentation (JSON `timing.total`, numba's first call included)", work)]
+            ("of which the segmentation (JSON `timing.total`, numba's first call included)", work),
+            ("of which the exit after the command (the interpreter's finalization)", exit_s)]
     lines = ["| what | median s |", "|---|---|", *(f"| {k} | {v:.3f} |" for k, v in rows), "",
              f"- Fixed cost of a run: {wall - work:.2f} s of the {wall:.2f} s process beside the segmentation's "
              f"{work:.2f} s; the interpreter and the libraries take {libraries:.2f} s of it, houghcad's own "
