@@ -384,9 +384,9 @@ def _misaligned_copies(P):
 @pytest.mark.parametrize("name", ["cone", "torus"])
 def test_refit_is_the_same_bits_whatever_the_memory_alignment(name):
     """The cone's and torus's refits give the same bits for the same points wherever they sit in
-    memory, and land on the surface. (scipy's MINPACK, used before, did not on an ill-conditioned
-    cone of a real cloud, 44 points with the apex far off, so a run's worker and main processes
-    disagreed; this synthetic case does not reach that, it guards the sums' order.)"""
+    memory (their rows are summed in scalar loops), and land on the surface. scipy's MINPACK,
+    which solves them, does not on an ill-conditioned cone of a real cloud (44 points, the apex
+    far off); this synthetic case does not reach that, it guards the rest of the refit."""
     rng = np.random.default_rng(3)
     fam = REGISTRY[name]
     if name == "cone":

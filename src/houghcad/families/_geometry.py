@@ -211,58 +211,6 @@ def damped_step(A, g, mu, D):
     return h, True
 
 
-#: Levenberg–Marquardt's starting damping, relative to the scaled normal matrix: a mild one, as
-#: the refits start from a voted primitive near the answer.
-LM_START_DAMPING = 1e-3
-#: Levenberg–Marquardt's stops: relative cost decrease and relative step below these (MINPACK's
-#: ftol and xtol defaults in scipy).
-LM_FTOL = 1e-8
-LM_XTOL = 1e-8
-
-
-def levenberg_marquardt(system, x0: np.ndarray, max_evaluations: int) -> np.ndarray | None:
-    """Levenberg–Marquardt on ``system(x) -> (Σ r², JᵀJ, Jᵀr)`` from x0; None when the first cost
-    is not finite.
-
-    Written here rather than taken from scipy: scipy's MINPACK gives answers that depend on its
-    buffers' memory alignment on ill-conditioned fits (a cone whose apex is far off), so the same
-    refit could differ between a run's worker and main processes. Here every sum runs in scalar
-    loops. Marquardt's scaling by the normal matrix's diagonal (its largest so far, as MINPACK),
-    and Nielsen's damping update from the gain ratio.
-    """
-    x = np.asarray(x0, dtype=np.float64).copy()
-    cost, A, g = system(x)
-    if not np.isfinite(cost):
-        return None
-    D = np.maximum(np.diag(A).copy(), 1e-300)
-    mu, nu = LM_START_DAMPING, 2.0
-    for _ in range(max_evaluations - 1):
-        h, ok = damped_step(A, g, mu, D)
-        if not ok:
-            mu, nu = mu * nu, nu * 2.0
-            continue
-        # Sums of a few terms by numpy's elementwise reduction, not BLAS's dot (see above).
-        Dh = float(np.sqrt((D * h * h).sum()))
-        if Dh <= LM_XTOL * (float(np.sqrt((D * x * x).sum())) + LM_XTOL):
-            break
-        predicted = mu * Dh * Dh - float((g * h).sum())
-        if predicted <= LM_FTOL * cost:
-            break  # no step can lower the cost by more than ftol: converged (MINPACK's ftol test)
-        xn = x + h
-        cn, An, gn = system(xn)
-        if np.isfinite(cn) and cn < cost:
-            rho = (cost - cn) / predicted
-            small = cost - cn <= LM_FTOL * cost
-            x, cost, A, g = xn, cn, An, gn
-            D = np.maximum(D, np.diag(A))
-            mu, nu = mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 2.0
-            if small:
-                break
-        else:
-            mu, nu = mu * nu, nu * 2.0
-    return x
-
-
 def gauss_newton(fun, x0: np.ndarray, iters: int = 8, tol: float = 1e-12) -> np.ndarray | None:
     """Damped Gauss–Newton on ``fun(x) -> (residuals (n,), jacobian (n, k))``.
 

@@ -43,7 +43,6 @@ from ._geometry import (  # noqa: F401
     damped_step,
     frame_turn_rows,
     gauss_newton,
-    levenberg_marquardt,
     lines_intersection,
     normal_equations,
     planes_intersection,

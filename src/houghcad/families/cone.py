@@ -7,17 +7,14 @@ from typing import Any
 
 import numba
 import numpy as np
+from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, axial, radial,
-                   axial_row, levenberg_marquardt, normal_equations, register, swept_votes, tangent_basis, turned_axis,
+                   axial_row, register, swept_votes, tangent_basis, turned_axis,
                    unit)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
-
-#: Evaluations of a refit's Levenberg–Marquardt at most: six parameters from a voted cone near the answer
-#: (scipy's MINPACK had the same budget).
-REFIT_EVALUATIONS = 40
 
 
 def cone_frame(P, N):
@@ -160,11 +157,15 @@ class Cone(Family):
         def unpack(x):
             return p0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5]
 
-        def system(x):
-            return normal_equations(*_refit_rows(P, p0, a0, e1, e2, x, True))
+        def res(x):
+            return _refit_rows(P, p0, a0, e1, e2, x, False)[0]
 
-        x = levenberg_marquardt(system, np.r_[0, 0, 0, 0, 0, al0], REFIT_EVALUATIONS)
-        if x is None:
+        def jac(x):
+            return _refit_rows(P, p0, a0, e1, e2, x, True)[1]
+
+        try:
+            x = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], jac=jac, method="lm", max_nfev=40).x
+        except Exception:
             return None
         p, a, al = unpack(x)
         if not (0 < al < np.pi / 2):

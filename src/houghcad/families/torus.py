@@ -7,16 +7,13 @@ from typing import Any
 
 import numba
 import numpy as np
+from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, axial, radial, register, swept_votes,
-                   axial_row, levenberg_marquardt, normal_equations, tangent_basis, turned_axis, unit)
+                   axial_row, tangent_basis, turned_axis, unit)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
-
-#: Evaluations of a refit's Levenberg–Marquardt at most: seven parameters from a voted torus near the answer
-#: (scipy's MINPACK had the same budget).
-REFIT_EVALUATIONS = 50
 
 
 def torus_frame(P, N):
@@ -186,12 +183,16 @@ class Torus(Family):
         def unpack(x):
             return c0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5], x[6]
 
-        def system(x):
-            return normal_equations(*_refit_rows(P, c0, a0, e1, e2, x, True))
+        def res(x):
+            return _refit_rows(P, c0, a0, e1, e2, x, False)[0]
+
+        def jac(x):
+            return _refit_rows(P, c0, a0, e1, e2, x, True)[1]
 
         x0 = np.r_[0, 0, 0, 0, 0, prim.params["major_radius"], prim.params["minor_radius"]]
-        x = levenberg_marquardt(system, x0, REFIT_EVALUATIONS)
-        if x is None:
+        try:
+            x = least_squares(res, x0, jac=jac, method="lm", max_nfev=50).x
+        except Exception:
             return None
         c, a, R, r = unpack(x)
         return Primitive("torus", {"center": c, "axis": a, "major_radius": float(abs(R)),
