@@ -384,7 +384,7 @@ def _misaligned_copies(P):
 @pytest.mark.parametrize("name", ["cone", "torus"])
 def test_refit_is_the_same_bits_whatever_the_memory_alignment(name):
     """The cone's and torus's refits give the same bits for the same points wherever they sit in
-    memory (their rows are summed in scalar loops), and land on the surface. scipy's MINPACK,
+    memory (their rows are computed in scalar loops), and land on the surface. scipy's MINPACK,
     which solves them, does not on an ill-conditioned cone of a real cloud (44 points, the apex
     far off); this synthetic case does not reach that, it guards the rest of the refit."""
     rng = np.random.default_rng(3)

@@ -54,9 +54,6 @@ def axial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarra
     return _axial(P, np.asarray(point, np.float64), np.asarray(axis, np.float64))
 
 
-# One pass in numba instead of four numpy temporaries: this runs on every candidate's points
-# (a whole-cloud round evaluates hundreds of axes over 10^5 points). Written out in scalar
-# arithmetic, it also gives the same bits on every CPU, where BLAS's dot kernels differ.
 @numba.njit(cache=True, inline="always")
 def axial_row(P, i, point, axis):
     """Point i of P (n, 3) about the axis through ``point`` (unit ``axis``): its offset
@@ -68,6 +65,9 @@ def axial_row(P, i, point, axis):
     return v0, v1, v2, h, w0, w1, w2, np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
 
 
+# One pass in numba instead of four numpy temporaries: this runs on every candidate's points
+# (a whole-cloud round evaluates hundreds of axes over 10^5 points). Written out in scalar
+# arithmetic, it also gives the same bits on every CPU, where BLAS's dot kernels differ.
 @numba.njit(cache=True)
 def _axial(P, point, axis):
     n = P.shape[0]
@@ -219,17 +219,19 @@ def gauss_newton(fun, x0: np.ndarray, iters: int = 8, tol: float = 1e-12) -> np.
     Its sums and solves run in scalar loops (:func:`normal_equations`,
     :func:`damped_step`), the same bits wherever the arrays sit in memory.
     """
+    def system(x):
+        r, J = fun(x)
+        return normal_equations(np.ascontiguousarray(r, np.float64), np.ascontiguousarray(J, np.float64))
+
     x = np.asarray(x0, float)
-    r, J = fun(x)
-    cost, A, g = normal_equations(np.ascontiguousarray(r, np.float64), np.ascontiguousarray(J, np.float64))
+    cost, A, g = system(x)
     lam = 1e-6
     for _ in range(iters):
         step, ok = damped_step(A, g, lam, np.diag(A) + 1e-15)
         if not ok:
             return None
         xn = x + step
-        rn, Jn = fun(xn)
-        cn, An, gn = normal_equations(np.ascontiguousarray(rn, np.float64), np.ascontiguousarray(Jn, np.float64))
+        cn, An, gn = system(xn)
         if not np.isfinite(cn):
             return None
         if cn <= cost:

@@ -12,8 +12,7 @@ from scipy.optimize import least_squares
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, axial, radial,
-                   axial_row, register, swept_votes, tangent_basis, turned_axis,
-                   unit)
+                   axial_row, register, swept_votes, tangent_basis, turned_axis, unit)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
 
 
