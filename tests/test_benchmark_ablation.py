@@ -49,8 +49,8 @@ def test_policy_variant_leaves_the_clean_policy_as_it_was():
 def test_variant_not_reached_gives_the_baseline_output(clean_block):
     cloud, res, (reads, _) = clean_block
     variants = {v.name: v for v in ablation.variants()}
-    # The fillet pass runs under the noisy policy only: a clean cloud never reads its tolerances.
-    quiet = variants["fillets.aligned_max_degx2"]
+    # The wide removal threshold is the noisy policy's: a clean cloud never reads it.
+    quiet = variants["scale.noisy_epsilon_tausx2"]
     assert not quiet.reaches(reads)
     again, _ = ablation._segment(cloud.points, "simple", quiet)
     assert fingerprint(again) == fingerprint(res)
@@ -66,9 +66,9 @@ def test_passes_that_change_the_state(clean_block):
     changed = {r for r in reads if r.startswith("pass:")}
     # Association always rewrites the records (maximal primitives); the noisy-policy passes never run.
     assert "pass:association" in changed
-    assert not {"pass:fillets", "pass:prefer_planes", "pass:settle_noisy_edges"} & changed
+    assert not {"pass:revisit_poor_fits", "pass:prefer_planes", "pass:settle_noisy_edges"} & changed
     assert ablation.Variant("x", skip=("consolidation",)).reaches(frozenset({"pass:consolidation.absorb"}))
-    assert not ablation.Variant("x", skip=("fillets",)).reaches(frozenset(changed))
+    assert not ablation.Variant("x", skip=("prefer_planes",)).reaches(frozenset(changed))
 
 
 def test_association_only_variant_matches_a_whole_run(clean_block):

@@ -1,6 +1,9 @@
-"""Rolling-ball fillets between adjacent segments of a noisy cloud.
+"""Rolling-ball fillets between adjacent segments.
 
-On a noisy cloud the inlier distance τ is a few σ. A fillet whose sag off its
+On exact samples at a low density, a fillet a few spacings wide is a strip
+one or two points across: too narrow for any vote, its points go partly to
+its two faces and stay partly free. On a noisy cloud the inlier distance τ is
+a few σ. A fillet whose sag off its
 two neighbours (the largest distance between the fillet and the sharp corner
 they would make) is below τ sits inside both neighbours' inlier bands: the
 recognition rounds give its points to them, and no vote on what is left can
@@ -19,7 +22,8 @@ cylinder or cone and a coaxial one: a torus) is tested for that fillet:
   points join the fit, its own primitive joins the null model;
 - the fillet is kept when it explains those points better than the sharp
   corner (and the pieces' own primitives) by far more than chance (a
-  likelihood-ratio test against the noise) and holds at least
+  likelihood-ratio test against the noise; on exact samples the noise
+  estimate is about 0, and any radius that fits better is kept) and holds at least
   ``min_points`` points. Its points then form a new segment, which keeps
   the fitted radius and axis (a free refit on a quarter tube a few σ
   across drifts); it replaces the pieces.

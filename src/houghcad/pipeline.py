@@ -134,8 +134,9 @@ def revisit_pass(seg: Segmentation, run: Run) -> Segmentation:
 
 
 def fillets_pass(seg: Segmentation, run: Run) -> Segmentation:
-    """Noisy clouds: fillets shallower than the inlier distance, hidden in
-    their neighbours, are tested between each pair of adjacent segments."""
+    """Fillets are tested between each pair of adjacent segments: on noisy
+    clouds those shallower than the inlier distance hide in their neighbours;
+    on exact samples those a few spacings wide are too narrow to vote."""
     find_fillets(seg, run.families, run.ctx)
     return seg
 
@@ -174,7 +175,7 @@ def association(seg: Segmentation, run: Run) -> Segmentation:
 
 
 ABSORB = Pass("absorb", absorb_pass, EXTENSION)
-SETTLE_NOISY = Pass("settle_noisy_edges", settle_noisy_pass, EXTENSION)
+SETTLE_NOISY = Pass("settle_noisy_edges", settle_noisy_pass, EXTENSION, when=_nearest_edges)
 ASSOCIATION = Pass("association", association, PAPER_5_4)
 
 #: The passes in order. Association comes last: it reads the final segments.
@@ -186,7 +187,7 @@ PIPELINE: tuple[Pass, ...] = (
     Pass("settle_noisy_edges", settle_noisy_pass, EXTENSION, when=_nearest_edges),
     Pass("revisit_poor_fits", revisit_pass, EXTENSION, when=_nearest_edges, after=(ABSORB, SETTLE_NOISY),
          only_if_changed=True),
-    Pass("fillets", fillets_pass, EXTENSION, when=_nearest_edges, after=(ABSORB, SETTLE_NOISY), only_if_changed=True),
+    Pass("fillets", fillets_pass, EXTENSION, after=(ABSORB, SETTLE_NOISY), only_if_changed=True),
     Pass("prefer_planes", prefer_planes_pass, EXTENSION, when=_nearest_edges),
     Pass("settle_edges", settle_edges_pass, EXTENSION, when=_shared_edges),
     Pass("refine", refine_pass, EXTENSION),

@@ -204,7 +204,7 @@ class ConsolidationTolerances:
 
 @dataclass(frozen=True)
 class FilletTolerances:
-    """Rolling-ball fillets on noisy clouds (extension, :mod:`houghcad.blend`)."""
+    """Rolling-ball fillets between adjacent segments (extension, :mod:`houghcad.blend`)."""
 
     lr_min: float = tol(25.0, "σ²", "likelihood ratio a fillet must reach over the sharp corner (sharp edges of the "
                         "synthetic parts reached 11-16, 28 with a tilted neighbour)")
