@@ -101,7 +101,7 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=_seed, default=0, metavar="N", help="random seed (default: 0)")
     p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
                    help="normals: 'auto' uses the file's normals if any, else PCA (creases voted on clean clouds, "
-                   "64 neighbours on noisy ones); 'pca' and 'voting' always estimate them (default: auto)")
+                   "up to 64 neighbours on noisy ones); 'pca' and 'voting' always estimate them (default: auto)")
     p.add_argument("--no-merge", action="store_true",
                    help="keep segments lying on one surface apart instead of merging them into one "
                    "maximal primitive (groups are found either way)")
