@@ -154,8 +154,8 @@ WIDE_NORMALS_SPACINGS = 0.3
 #: the 16 of a clean cloud and 64: a PCA normal's error falls as the neighbourhood grows
 #: against σ, so noisier clouds need more neighbours; but more than the noise needs reach
 #: across narrow faces (a groove wall or a chamfer three spacings wide) and blend their
-#: normals with their neighbours'. The estimate reads 0.45-0.55 spacings at σ = 0.2 % of the
-#: diagonal on the synthetic parts (36-44 neighbours) and 0.7-0.85 at 0.5 %, on single
+#: normals with their neighbours'. The estimate reads 0.44-0.54 spacings at σ = 0.2 % of the
+#: diagonal on the synthetic parts (35-43 neighbours) and 0.7-0.85 at 0.5 %, on single
 #: primitives at 1 % and on the paper's Table 5 block at every σ (56-64), where it saturates:
 #: σ widens the spacing too, so the estimate cannot tell 0.5 % from 3 %; 40 per spacing
 #: (half as many) helped the parts more but lost types on single primitives at 0.5-1 % and
