@@ -141,30 +141,8 @@ def profile_distance(X: np.ndarray, C: np.ndarray, t: np.ndarray, n: np.ndarray,
     are the lines' unit normals. r = 0 is the sharp corner. Returns the
     distance (m,) and whether the arc is the nearest piece (m,).
     """
-    cos_t = float(np.clip(t[0] @ t[1], -1.0, 1.0))
-    half = np.arccos(cos_t) / 2
-    s = r / np.tan(half)  # corner to tangent points
-    dist = np.full(len(X), np.inf)
-    for k in range(2):
-        along = (X - C) @ t[k]
-        across = np.abs((X - C) @ n[k])
-        end = C + s * t[k]
-        d = np.where(along >= s, across, np.linalg.norm(X - end, axis=1))
-        dist = np.minimum(dist, d)
-    on_arc = np.zeros(len(X), bool)
-    if r > 0:
-        b = unit(t[0] + t[1])
-        O = C + (r / np.sin(half)) * b
-        v = X - O
-        rv = np.linalg.norm(v, axis=1)
-        # Within the arc's angular span: between the normals at the tangent points.
-        ta, tb = C + s * t[0] - O, C + s * t[1] - O
-        cross = lambda u, w: u[..., 0] * w[..., 1] - u[..., 1] * w[..., 0]  # noqa: E731
-        inside = (np.sign(cross(ta, v)) == np.sign(cross(ta, tb))) & (np.sign(cross(v, tb)) == np.sign(cross(ta, tb)))
-        d_arc = np.where(inside, np.abs(rv - r), np.inf)
-        on_arc = d_arc < dist
-        dist = np.minimum(dist, d_arc)
-    return dist, on_arc
+    X, C, t, n = (np.ascontiguousarray(a, dtype=np.float64) for a in (X, C, t, n))
+    return _profile_rows(X, C, t, n, float(r))
 
 
 @dataclass
@@ -338,39 +316,70 @@ def _sign(x: float) -> int:
 
 # Scalar loops in numba: the radius grids ask for a profile's sum of squares some
 # sixty times a corner, and numpy's temporaries per call were most of a corner's cost.
-@numba.njit(cache=True, nogil=True)
-def _profile_sse(X: np.ndarray, C: np.ndarray, t: np.ndarray, n: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Sum over X (m, 2) of the squared :func:`profile_distance` for each radius
-    in ``radii`` (k,) (all > 0); returns (k,)."""
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _profile_geometry(C, t, r):
+    """The rounded corner of radius r: the corner-to-tangent-point length s, the arc's centre
+    (ox, oy), the centre-to-tangent-point vectors ta, tb and the sign of their cross product."""
     cos_t = min(max(t[0, 0] * t[1, 0] + t[0, 1] * t[1, 1], -1.0), 1.0)
     half = np.arccos(cos_t) / 2
     bx, by = t[0, 0] + t[1, 0], t[0, 1] + t[1, 1]
     bn = np.sqrt(bx * bx + by * by)
     if bn > 0:
         bx, by = bx / bn, by / bn
+    s = r / np.tan(half)
+    h = r / np.sin(half)
+    ox, oy = C[0] + h * bx, C[1] + h * by
+    tax, tay = C[0] + s * t[0, 0] - ox, C[1] + s * t[0, 1] - oy
+    tbx, tby = C[0] + s * t[1, 0] - ox, C[1] + s * t[1, 1] - oy
+    return s, ox, oy, tax, tay, tbx, tby, _sign(tax * tby - tay * tbx)
+
+
+@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _profile_point(X, i, C, t, n, r, geo):
+    """Point i of X: its distance to the rounded corner (``geo`` from :func:`_profile_geometry`)
+    and whether the arc is its nearest piece."""
+    s, ox, oy, tax, tay, tbx, tby, sg = geo
+    px, py = X[i, 0] - C[0], X[i, 1] - C[1]
+    dist = np.inf
+    for k in range(2):
+        if px * t[k, 0] + py * t[k, 1] >= s:
+            d = abs(px * n[k, 0] + py * n[k, 1])
+        else:
+            ex, ey = px - s * t[k, 0], py - s * t[k, 1]
+            d = np.sqrt(ex * ex + ey * ey)
+        dist = min(dist, d)
+    if r > 0:
+        # Within the arc's angular span: between the normals at the tangent points.
+        vx, vy = X[i, 0] - ox, X[i, 1] - oy
+        if _sign(tax * vy - tay * vx) == sg and _sign(vx * tby - vy * tbx) == sg:
+            d_arc = abs(np.sqrt(vx * vx + vy * vy) - r)
+            if d_arc < dist:
+                return d_arc, True
+    return dist, False
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _profile_rows(X, C, t, n, r):
+    """:func:`profile_distance` in numba: distances (m,) and on-arc flags (m,)."""
+    geo = _profile_geometry(C, t, r)
+    dist = np.empty(X.shape[0])
+    on_arc = np.zeros(X.shape[0], np.bool_)
+    for i in range(X.shape[0]):
+        dist[i], on_arc[i] = _profile_point(X, i, C, t, n, r, geo)
+    return dist, on_arc
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _profile_sse(X: np.ndarray, C: np.ndarray, t: np.ndarray, n: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Sum over X (m, 2) of the squared :func:`profile_distance` for each radius
+    in ``radii`` (k,); returns (k,)."""
     out = np.empty(len(radii))
     for j in range(len(radii)):
         r = radii[j]
-        s = r / np.tan(half)
-        h = r / np.sin(half)
-        ox, oy = C[0] + h * bx, C[1] + h * by
-        tax, tay = C[0] + s * t[0, 0] - ox, C[1] + s * t[0, 1] - oy
-        tbx, tby = C[0] + s * t[1, 0] - ox, C[1] + s * t[1, 1] - oy
-        sg = _sign(tax * tby - tay * tbx)
+        geo = _profile_geometry(C, t, r)
         acc = 0.0
         for i in range(X.shape[0]):
-            px, py = X[i, 0] - C[0], X[i, 1] - C[1]
-            dist = np.inf
-            for k in range(2):
-                if px * t[k, 0] + py * t[k, 1] >= s:
-                    d = abs(px * n[k, 0] + py * n[k, 1])
-                else:
-                    ex, ey = px - s * t[k, 0], py - s * t[k, 1]
-                    d = np.sqrt(ex * ex + ey * ey)
-                dist = min(dist, d)
-            vx, vy = X[i, 0] - ox, X[i, 1] - oy
-            if _sign(tax * vy - tay * vx) == sg and _sign(vx * tby - vy * tbx) == sg:
-                dist = min(dist, abs(np.sqrt(vx * vx + vy * vy) - r))
-            acc += dist * dist
+            d = _profile_point(X, i, C, t, n, r, geo)[0]
+            acc += d * d
         out[j] = acc
     return out
