@@ -80,10 +80,7 @@ def _gauss_newton_fit(P, a0, p0, e1, e2, r0):
     cost, A, g = _normal_equations(P, a0, p0, e1, e2, x)
     lam = 1e-6
     for _ in range(8):
-        D = np.empty(5)
-        for j in range(5):
-            D[j] = A[j, j] + 1e-15
-        step, ok = damped_step(A, g, lam, D)
+        step, ok = damped_step(A, g, lam, np.diag(A) + 1e-15)
         if not ok:
             return None
         xn = x + step
