@@ -5,8 +5,10 @@ neighbourhood lies on such a face alone, so its PCA normals are blends of the fa
 neither the axis estimate nor the vote places it. On CAD parts such features are mostly coaxial
 with, or perpendicular to, a neighbour. With a neighbour's axis or normal as the direction, what
 is left of the standard form is found from the points alone, no normals needed: cylinders about
-the direction are circles in the plane across it, planes across it are levels along it. The
-features of a cluster are taken in turn, each the largest one left.
+the direction are circles in the plane across it, planes across it are levels along it, and a
+cone about a known axis line (a countersink or a chamfer round a hole) is a line in the meridian
+plane, radius against height. The features of a cluster are taken in turn, each the largest one
+left.
 """
 
 from __future__ import annotations
@@ -30,11 +32,15 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
     ``ctx.min_points`` and together hold ``aligned_cover`` of the cluster."""
     fams = {f.name: f for f in families}
     cyl, plane = fams.get("cylinder"), fams.get("plane")
+    # On a noisy cloud one cylinder of all the points is fitted (see one_aligned_cylinder): a
+    # cone's two parameters on a band ±τ would be a chance fit there too.
+    cone = None if ctx.policy.one_aligned_cylinder else fams.get("cone")
     if (cyl is None and plane is None) or not len(seg) or len(cl) < ctx.min_points:
         return []
     t = ctx.tol.splitting
     adj, border = _adjacent(cl, seg, ctx)
     axes = _distinct_axes(adj, seg, ctx)
+    lines = [] if cone is None else _axis_lines([seg.records[j].prim for j in adj])
     out: list[Candidate] = []
     # Seeded by the cluster, so that a cluster gets the same answer in any order.
     rng = np.random.default_rng([ctx.seed, int(cl[0])])
@@ -43,6 +49,10 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
         if len(rest) < ctx.min_points:
             break
         best = _largest_feature(rest, border, axes, cyl, plane, rng, ctx)
+        if cone is not None:
+            alt = _largest_cone(ctx.pre.points[rest], ctx.pre.normals[rest], lines, cone, rng, ctx)
+            if alt is not None and (best is None or alt[2].sum() > best[2].sum()):
+                best = alt
         if best is None:
             break
         fam, prim, on = best
@@ -51,7 +61,12 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
             break
         out += got
         rest = rest[~on]
-    if not out or sum(len(c.indices) for c in out) < t.aligned_cover * len(cl):
+        if cone is not None:
+            lines += _axis_lines([prim])
+    # What the features leave must be a small share of the cluster, or fewer points than any
+    # segment holds: a counterbore's step a few points wide is no feature of its own.
+    left = len(cl) - sum(len(c.indices) for c in out)
+    if not out or (left > (1.0 - t.aligned_cover) * len(cl) and left >= ctx.min_points):
         return []
     return select(out, seg.free, ctx)
 
@@ -161,6 +176,74 @@ def _kasa(Q: np.ndarray) -> tuple[np.ndarray, float] | None:
     sol = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0]
     r2 = sol[2] + sol[:2] @ sol[:2]
     return (sol[:2], float(np.sqrt(r2))) if r2 > 0 else None
+
+
+def _axis_lines(prims: list[Primitive]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The axis lines ``(point (3,), unit direction (3,))`` of the cylinders among ``prims``.
+    (A cone's points left beside a cone on the same axis are mostly that cone's own: a second
+    cone fitted to a few of them would split its face.)"""
+    out = []
+    for p in prims:
+        if p.family == "cylinder":
+            a = np.asarray(p.params["axis"], float)
+            out.append((np.asarray(p.params["axis_point"], float), a / np.linalg.norm(a)))
+    return out
+
+
+def _largest_cone(X: np.ndarray, N: np.ndarray, lines: list[tuple[np.ndarray, np.ndarray]], cone: Family,
+                  rng: np.random.Generator, ctx: Context) -> tuple[Family, Primitive, np.ndarray] | None:
+    """The cone about one of the axis ``lines`` with the most of the points X (m, 3) (normals
+    N (m, 3)) within τ, as ``(family, primitive, inlier mask (m,))``, or None when none holds
+    ``ctx.min_points``.
+
+    About a known axis a cone is a line ρ = c₀ + c₁ h in the meridian plane (height h along the
+    axis, distance ρ from it): lines through two points drawn at random (``aligned_samples``),
+    the best refitted by least squares on its points, then the cone refitted with its axis free
+    (the line it came from was fitted to a hole's few points). Written here for the same reason
+    as :func:`_best_circle`: two parameters over a few dozen points."""
+    m = len(X)
+    best, count = None, ctx.min_points - 1
+    if m < 2:
+        return None
+    t = ctx.tol.splitting
+    for point, a in lines:
+        V = X - point
+        h = V @ a
+        rho = np.linalg.norm(V - h[:, None] * a, axis=1)
+        pair = rng.integers(0, m, size=(t.aligned_samples, 2))
+        dh = h[pair[:, 1]] - h[pair[:, 0]]
+        ok = np.abs(dh) > ctx.tau
+        if not ok.any():
+            continue
+        c1 = (rho[pair[ok, 1]] - rho[pair[ok, 0]]) / dh[ok]
+        c0 = rho[pair[ok, 0]] - c1 * h[pair[ok, 0]]
+        d = np.abs(rho[None, :] - c0[:, None] - c1[:, None] * h[None, :]) / np.sqrt(1 + c1[:, None] ** 2)
+        k = int(np.argmax((d <= ctx.tau).sum(axis=1)))
+        on = d[k] <= ctx.tau
+        if on.sum() <= count:
+            continue
+        c1k, c0k = np.polyfit(h[on], rho[on], 1)
+        if c1k == 0:
+            continue
+        # Apex where the radius vanishes; the axis opens towards the growing radius.
+        prim = Primitive("cone", {"apex": point - c0k / c1k * a, "axis": np.sign(c1k) * a,
+                                  "half_angle": float(np.arctan(abs(c1k)))})
+        if not cone.valid(prim, ctx):
+            continue
+        on = cone.distance(prim, X) <= ctx.tau
+        for _ in range(t.aligned_refits):
+            fit = cone.fit(prim, X[on], N[on]) if on.sum() >= ctx.min_points else None
+            if fit is None or not cone.valid(fit, ctx):
+                break
+            on2 = cone.distance(fit, X) <= ctx.tau
+            if on2.sum() < on.sum():
+                break
+            prim, on = fit, on2
+        # Exact samples of a cone lie on it once its axis is free; a short arc of a torus
+        # fillet, or a crease between a plane and a cylinder, fits a cone only to a share of τ.
+        if on.sum() > count and cone.distance(prim, X[on]).mean() <= t.aligned_cone_taus * ctx.tau:
+            best, count = (cone, prim, on), int(on.sum())
+    return best
 
 
 def _adjacent(cl: np.ndarray, seg: Segmentation, ctx: Context) -> tuple[list[int], np.ndarray]:

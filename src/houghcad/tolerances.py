@@ -129,9 +129,12 @@ class SplittingTolerances:
     aligned_samples: int = tol(256, "circles", "circles through three points drawn per direction: a feature with a "
                                "third of a cluster's points is drawn about ten times")
     aligned_band_taus: float = tol(2.0, "τ", "boundary points this close to a cylinder join its refit")
-    aligned_refits: int = tol(2, "refits", "refits of a cylinder on its points and the boundary rows")
+    aligned_refits: int = tol(2, "refits", "refits of an aligned cylinder (on its points and the boundary rows) or cone")
     aligned_pieces: int = tol(4, "features", "features aligned with the neighbours taken per cluster: a counterbore "
                               "is three (bore, step, hole); a surface the normals missed, sliced into rings, is many")
+    aligned_cone_taus: float = tol(0.02, "τ", "a cone about a hole's axis, refitted axis free, must fit its points "
+                                   "to the rounding of an exact fit: a torus fillet's arc or a crease fits a cone "
+                                   "to 0.04-0.6 τ")
     aligned_cover: float = tol(0.8, "share", "the aligned features must explain this much of the cluster together")
     crease_neighbours: int = tol(6, "points", "a cluster's crease point takes the PCA normal of this many of the "
                                  "cluster's points: on a hole a few spacings wide, more reach across it")
