@@ -66,9 +66,9 @@ def test_passes_that_change_the_state(clean_block):
     changed = {r for r in reads if r.startswith("pass:")}
     # Association always rewrites the records (maximal primitives); the noisy-policy passes never run.
     assert "pass:association" in changed
-    assert not {"pass:revisit_poor_fits", "pass:prefer_planes", "pass:settle_noisy_edges"} & changed
+    assert not {"pass:revisit_poor_fits", "pass:settle_noisy_edges"} & changed
     assert ablation.Variant("x", skip=("consolidation",)).reaches(frozenset({"pass:consolidation.absorb"}))
-    assert not ablation.Variant("x", skip=("prefer_planes",)).reaches(frozenset(changed))
+    assert not ablation.Variant("x", skip=("revisit_poor_fits",)).reaches(frozenset(changed))
 
 
 def test_association_only_variant_matches_a_whole_run(clean_block):

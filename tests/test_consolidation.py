@@ -197,6 +197,39 @@ def test_noisy_curved_segment_that_a_plane_fits_as_well_becomes_a_plane():
     assert seg[0].family.name == "cylinder"
 
 
+def test_an_exact_strip_two_rows_wide_read_as_a_cylinder_becomes_a_plane():
+    # Two rows of exact samples lie on a plane and on every cylinder through both rows; the
+    # simpler surface is taken. An exact cylinder over many rows stays a cylinder.
+    x = np.arange(40.0)
+    strip = np.c_[np.r_[x, x + 0.5], np.r_[np.zeros(40), np.ones(40)], np.zeros(80)]
+    gx, gy = np.meshgrid(np.arange(20.0), np.arange(20.0))
+    plate = np.c_[gx.ravel(), gy.ravel() + 5.0, np.full(gx.size, 3.0)]
+    ctx = context(np.r_[strip, plate])
+    P = ctx.pre.points
+    idx = np.arange(80)
+    Q = P[idx]
+    axis = Q[39] - Q[0]
+    axis /= np.linalg.norm(axis)
+    across = Q[40] - Q[0] - ((Q[40] - Q[0]) @ axis) * axis
+    normal = np.cross(axis, across / np.linalg.norm(across))
+    w, h = np.linalg.norm(across), 4.0 * np.linalg.norm(across)
+    centre = Q[0] + across / 2 - h * normal
+    cyl = Primitive("cylinder", {"axis_point": centre, "axis": axis, "radius": float(np.hypot(w / 2, h))})
+    assert REGISTRY["cylinder"].distance(cyl, Q).max() < 1e-9
+    seg = Segmentation.of(len(P), [Candidate(REGISTRY["cylinder"], cyl, idx, 0.0, np.zeros(80))])
+    assert prefer_planes(seg, select("simple"), ctx) == 1
+    assert seg[0].family.name == "plane"
+    cloud = synth.single("cylinder", 0, n_points=3000)
+    ctx = context(cloud.points)
+    T = ctx.pre.transform
+    g = cloud.primitives[0]["params"]
+    prim = Primitive("cylinder", {"axis_point": T.points(np.asarray(g["axis_point"])[None])[0],
+                                  "axis": T.dirs(np.asarray(g["axis"])[None])[0], "radius": T.scale * g["radius"]})
+    idx = np.flatnonzero(cloud.labels == 0)
+    seg = Segmentation.of(len(cloud.points), [Candidate(REGISTRY["cylinder"], prim, idx, 0.0, np.zeros(len(idx)))])
+    assert prefer_planes(seg, select("simple"), ctx) == 0
+
+
 def test_a_torus_cut_into_bands_is_joined_again():
     """Over-segmentation reduced: a torus carved into cylinder and plane bands (over a hundred of
     them), as rounds of the simpler families leave it, is one torus again after the per-cluster

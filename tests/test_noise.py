@@ -37,7 +37,7 @@ def test_the_noise_option_chooses_the_policy_once():
     assert res.options["derived"]["noise_policy"] == "noisy" and "settle_noisy_edges" in steps
     res, steps = _steps(noisy, noise="clean")
     assert res.options["derived"]["noise_policy"] == "clean"
-    assert "settle_edges" in steps and "settle_noisy_edges" not in steps and "prefer_planes" not in steps
+    assert "settle_edges" in steps and "settle_noisy_edges" not in steps and "revisit_poor_fits" not in steps
     clean = synth.block_with_hole_and_slot(seed=1, n_points=2500).points
     res, steps = _steps(clean, noise="noisy")
     assert res.options["noise"] == "noisy" and res.options["normals_used"].startswith("pca-k")

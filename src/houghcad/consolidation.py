@@ -399,8 +399,8 @@ def _union(c: Candidate, parts: list[np.ndarray], P: np.ndarray) -> Candidate:
 
 
 def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> int:
-    """On a noisy cloud, give a plane to each curved segment that a plane
-    fits as well, in place; returns how many.
+    """Give a plane to each curved segment that a plane fits as well, in
+    place; returns how many.
 
     A cylinder or sphere of radius many times a face's width sags off it by
     less than the noise: on a noisy plane face it fits as well as the plane
@@ -408,16 +408,20 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
     final refit, on two box faces). A cylinder, sphere or torus is compared
     with the plane by MSAC cost over all the segment's points; the plane
     takes the segment unless it is worse by more than two standard errors
-    (so does a short arc of a small hole that the noise leaves flat). A
-    ``fixed`` primitive (a fillet found by :mod:`houghcad.blend`) stays.
+    (so does a short arc of a small hole that the noise leaves flat), or
+    by the rounding of exact fits (``cover_taus``), which decides on exact
+    samples: a strip one or two rows wide (a chamfer, a land) lies on a
+    plane and on every cylinder through its rows, and the blended normals
+    there often vote the cylinder alone. A ``fixed`` primitive (a fillet
+    found by :mod:`houghcad.blend`) stays.
     """
     plane = next((f for f in families if f.name == "plane"), None)
-    if plane is None or not ctx.policy.nearest_edges:
+    if plane is None:
         return 0
     P, N = ctx.pre.points, ctx.pre.normals
     changed = 0
     for k, s in enumerate(seg):
-        if s.family.name not in ("cylinder", "sphere", "torus") or s.fixed or \
+        if s.family.name not in ("cylinder", "cone", "sphere", "torus") or s.fixed or \
                 len(s.indices) < ctx.tol.consolidation.plane_min_points:
             continue
         Q = P[s.indices]
@@ -428,7 +432,8 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
             continue
         d_own = np.minimum(s.family.distance(s.prim, Q), ctx.tau)
         d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
-        if d_pl.mean() > d_own.mean() + ctx.tol.consolidation.plane_se * d_own.std() / np.sqrt(len(Q)):
+        t = ctx.tol.consolidation
+        if d_pl.mean() > d_own.mean() + max(t.plane_se * d_own.std() / np.sqrt(len(Q)), t.cover_taus * ctx.tau):
             continue
         seg.set_record(k, SegmentRecord(plane, prim))
         changed += 1

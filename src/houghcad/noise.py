@@ -66,9 +66,9 @@ class NoisePolicy:
         (planes slicing a noisy curved surface meet at wide creases).
     nearest_edges : bool
         Boundaries go where the surfaces cross (nearest surface, with the
-        sides of each edge), then poor fits are revisited, fillets sought and
-        flat curved segments made planes; on clean clouds the boundary rows,
-        which lie on both faces, go to the face with the smaller core.
+        sides of each edge), then poor fits are revisited; on clean clouds
+        the boundary rows, which lie on both faces, go to the face with the
+        smaller core.
     torus_grid_from_points : bool
         The torus accumulator's major radii stop at the points' own distances
         from the axis. On exact samples they reach on to where the points'

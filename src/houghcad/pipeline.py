@@ -188,7 +188,7 @@ PIPELINE: tuple[Pass, ...] = (
     Pass("revisit_poor_fits", revisit_pass, EXTENSION, when=_nearest_edges, after=(ABSORB, SETTLE_NOISY),
          only_if_changed=True),
     Pass("fillets", fillets_pass, EXTENSION, after=(ABSORB, SETTLE_NOISY), only_if_changed=True),
-    Pass("prefer_planes", prefer_planes_pass, EXTENSION, when=_nearest_edges),
+    Pass("prefer_planes", prefer_planes_pass, EXTENSION),
     Pass("settle_edges", settle_edges_pass, EXTENSION, when=_shared_edges),
     Pass("refine", refine_pass, EXTENSION),
     ASSOCIATION,
