@@ -12,10 +12,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from .context import Context
 from .families import Family, Primitive
@@ -43,9 +42,7 @@ def dbscan(P: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
     deg = np.bincount(pairs.ravel(), minlength=n) + 1
     core = deg >= min_samples
     both = core[pairs[:, 0]] & core[pairs[:, 1]]
-    cc = pairs[both]
-    _, comp = connected_components(coo_matrix((np.ones(len(cc)), (cc[:, 0], cc[:, 1])), shape=(n, n)),
-                                   directed=False)
+    comp = _components(n, pairs[both])
     lab = np.full(n, -1, np.int64)
     if not core.any():
         return lab
@@ -67,6 +64,36 @@ def dbscan(P: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
     border = cand < none
     lab[border] = cand[border]
     return lab
+
+
+# Union-find in numba instead of scipy's connected_components: the recognition clusters thousands
+# of small inlier sets per cloud, and building and validating a sparse matrix for each cost more
+# than the components themselves. Components are numbered by their lowest point afterwards, so
+# the labels are the same whichever way they are found.
+@numba.njit(cache=True)
+def _components(n: int, pairs: np.ndarray) -> np.ndarray:
+    """A component id (its root point, int64 (n,)) per point of the undirected graph on n
+    points with the edges ``pairs`` (m, 2)."""
+    root = np.arange(n)
+    for e in range(pairs.shape[0]):
+        a, b = pairs[e, 0], pairs[e, 1]
+        while root[a] != a:
+            root[a] = root[root[a]]
+            a = root[a]
+        while root[b] != b:
+            root[b] = root[root[b]]
+            b = root[b]
+        if a != b:
+            if a < b:
+                root[b] = a
+            else:
+                root[a] = b
+    for i in range(n):
+        r = i
+        while root[r] != r:
+            r = root[r]
+        root[i] = r
+    return root
 
 
 def dense_subsets(P: np.ndarray, link: float, min_points: int, min_samples: int) -> list[np.ndarray]:
