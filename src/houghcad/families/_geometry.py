@@ -19,12 +19,22 @@ def regular_indices(n: int, m: int) -> np.ndarray:
     return np.arange(n) if n <= m else np.linspace(0, n - 1, m).astype(np.int64)
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The cross product of two 3-vectors, with np.cross's arithmetic (the same bits) without
+    its broadcasting set-up, which costs tens of microseconds a call: the refits ask for
+    tangent bases tens of thousands of times a cloud."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def tangent_basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors completing ``a`` to an orthonormal basis."""
     a = unit(a)
-    h = np.eye(3)[int(np.argmin(np.abs(a)))]
-    e1 = unit(np.cross(a, h))
-    return e1, np.cross(a, e1)
+    h = np.zeros(3)
+    h[int(np.argmin(np.abs(a)))] = 1.0
+    e1 = unit(cross3(a, h))
+    return e1, cross3(a, e1)
 
 
 def unit_derivatives(b: np.ndarray, dirs: tuple[np.ndarray, ...]) -> np.ndarray:
