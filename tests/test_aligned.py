@@ -51,22 +51,15 @@ def test_the_brackets_counterbores_come_out_as_hole_bore_and_step():
     # points; before this extension every hole, and some whole counterbores, stayed
     # unsegmented (the bracket's mean DSC was 0.80).
     cloud = synth.bracket(seed=0, n_points=8000)
-    res = houghcad.segment(cloud.points, families="simple", seed=0)
-    faces = [np.asarray(f) for f in res.faces()]
-    types = [s.type for s in res.segments for _ in s.faces()]
-    per = classification_measures(faces, cloud.segments(), len(cloud.points), per_segment=True)
-    lab = np.full(len(cloud.points), -1)
-    for k, f in enumerate(faces):
-        lab[f] = k
-    names = [p["name"] for p in cloud.primitives]
-    bores = [k for k, n in enumerate(names) if n.startswith("counterbore")]
+    got, dsc = _faces_by_name(cloud, houghcad.segment(cloud.points, families="simple", seed=0))
+    bores = [k for k, p in enumerate(cloud.primitives) if p["name"].startswith("counterbore")]
     assert len(bores) == 12
     for k in bores:
-        g = cloud.segments()[k]
-        best = int(np.bincount(lab[g][lab[g] >= 0]).argmax())
-        assert types[best] == cloud.primitives[k]["type"], names[k]
-        assert per["per_segment"]["DSC"][k] >= 0.6, (names[k], per["per_segment"]["DSC"][k])
-    assert per["DSC"] >= 0.9
+        name = cloud.primitives[k]["name"]
+        t, d, _ = got[name]
+        assert t == cloud.primitives[k]["type"], name
+        assert d >= 0.6, (name, d)
+    assert dsc >= 0.9
 
 
 def _countersink(s: float, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -103,7 +96,9 @@ def test_a_fillets_arc_is_no_cone_about_the_axis():
     assert _largest_cone(X, np.zeros_like(X), [line], select_families(["cone"])[0], rng, ctx) is None
 
 
-def _faces_by_name(cloud, res):
+def _faces_by_name(cloud, res) -> tuple[dict[str, tuple[str | None, float, int]], float]:
+    """Per true face name: the type of the predicted face holding most of its points (None when
+    all are unsegmented), its DSC and its size; and the mean DSC over the faces."""
     faces = [np.asarray(f) for f in res.faces()]
     types = [s.type for s in res.segments for _ in s.faces()]
     per = classification_measures(faces, cloud.segments(), len(cloud.points), per_segment=True)
@@ -115,7 +110,7 @@ def _faces_by_name(cloud, res):
         g = lab[cloud.segments()[k]]
         best = types[int(np.bincount(g[g >= 0]).argmax())] if (g >= 0).any() else None
         out[p["name"]] = (best, per["per_segment"]["DSC"][k], len(cloud.segments()[k]))
-    return out
+    return out, per["DSC"]
 
 
 def test_the_brackets_countersinks_come_out_as_cones_at_4000_points():
@@ -123,7 +118,7 @@ def test_the_brackets_countersinks_come_out_as_cones_at_4000_points():
     # the cone's own, and before the cone about the hole's axis both stayed unsegmented.
     for seed in (0, 1):
         cloud = synth.bracket(seed=seed, n_points=4000)
-        got = _faces_by_name(cloud, houghcad.segment(cloud.points, families="simple", seed=0))
+        got, _ = _faces_by_name(cloud, houghcad.segment(cloud.points, families="simple", seed=0))
         sinks = {n: v for n, v in got.items() if n.startswith("countersink")}
         assert len(sinks) == 2
         for name, (t, dsc, _) in sinks.items():
@@ -134,7 +129,7 @@ def test_a_counterbore_whose_step_is_under_a_segments_size_keeps_its_hole_and_bo
     # At 4,000 points some counterbores' steps hold 5-7 points, fewer than the smallest
     # segment: the hole and bore explain all the rest of the cluster, and are taken.
     cloud = synth.bracket(seed=2, n_points=4000)
-    got = _faces_by_name(cloud, houghcad.segment(cloud.points, families="simple", seed=0))
+    got, _ = _faces_by_name(cloud, houghcad.segment(cloud.points, families="simple", seed=0))
     small_step = [n[:-len(" step")] for n, (_, _, size) in got.items() if n.endswith(" step") and size < 8]
     assert len(small_step) >= 2
     for base in small_step:

@@ -185,7 +185,15 @@ def test_noisy_curved_segment_that_a_plane_fits_as_well_becomes_a_plane():
     seg.set_record(0, replace(seg.records[0], fixed=True))
     assert prefer_planes(seg, select("simple"), ctx) == 0
     # A noisy cylinder (its true primitive, in the standard frame) stays one.
-    cloud = synth.single("cylinder", 0, n_points=3000, noise=0.005)
+    seg, ctx = _true_cylinder_segment(noise=0.005)
+    assert prefer_planes(seg, select("simple"), ctx) == 0
+    assert seg[0].family.name == "cylinder"
+
+
+def _true_cylinder_segment(noise: float) -> tuple[Segmentation, object]:
+    """A single synthetic cylinder as one segment holding its true primitive (standard frame),
+    and the run context."""
+    cloud = synth.single("cylinder", 0, n_points=3000, noise=noise)
     ctx = context(cloud.points)
     T = ctx.pre.transform
     g = cloud.primitives[0]["params"]
@@ -193,8 +201,7 @@ def test_noisy_curved_segment_that_a_plane_fits_as_well_becomes_a_plane():
                                   "axis": T.dirs(np.asarray(g["axis"])[None])[0], "radius": T.scale * g["radius"]})
     idx = np.flatnonzero(cloud.labels == 0)
     seg = Segmentation.of(len(cloud.points), [Candidate(REGISTRY["cylinder"], prim, idx, 0.0, np.zeros(len(idx)))])
-    assert prefer_planes(seg, select("simple"), ctx) == 0
-    assert seg[0].family.name == "cylinder"
+    return seg, ctx
 
 
 def test_an_exact_strip_two_rows_wide_read_as_a_cylinder_becomes_a_plane():
@@ -219,14 +226,7 @@ def test_an_exact_strip_two_rows_wide_read_as_a_cylinder_becomes_a_plane():
     seg = Segmentation.of(len(P), [Candidate(REGISTRY["cylinder"], cyl, idx, 0.0, np.zeros(80))])
     assert prefer_planes(seg, select("simple"), ctx) == 1
     assert seg[0].family.name == "plane"
-    cloud = synth.single("cylinder", 0, n_points=3000)
-    ctx = context(cloud.points)
-    T = ctx.pre.transform
-    g = cloud.primitives[0]["params"]
-    prim = Primitive("cylinder", {"axis_point": T.points(np.asarray(g["axis_point"])[None])[0],
-                                  "axis": T.dirs(np.asarray(g["axis"])[None])[0], "radius": T.scale * g["radius"]})
-    idx = np.flatnonzero(cloud.labels == 0)
-    seg = Segmentation.of(len(cloud.points), [Candidate(REGISTRY["cylinder"], prim, idx, 0.0, np.zeros(len(idx)))])
+    seg, ctx = _true_cylinder_segment(noise=0.0)
     assert prefer_planes(seg, select("simple"), ctx) == 0
 
 
