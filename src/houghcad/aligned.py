@@ -25,11 +25,13 @@ from .state import Candidate, Segmentation, mean_fitting_error
 
 def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, ctx: Context) -> list[Candidate]:
     """Cylinders coaxial with, and planes across, the axes and normals of the segments adjacent
-    to the cluster ``cl`` (global indices), for a cluster the normals could not place.
+    to the cluster ``cl`` (global indices), and cones about the adjacent and found cylinders'
+    axis lines, for a cluster the normals could not place.
 
-    Features are taken in turn, each the largest aligned circle or level among the points the
-    ones before it left (at most ``aligned_pieces``); their pieces are dense subsets of at least
-    ``ctx.min_points`` and together hold ``aligned_cover`` of the cluster."""
+    Features are taken in turn, each the largest aligned circle, level or cone among the points
+    the ones before it left (at most ``aligned_pieces``); their pieces are dense subsets of at
+    least ``ctx.min_points`` and together hold ``aligned_cover`` of the cluster, or leave fewer
+    than ``ctx.min_points`` of it."""
     fams = {f.name: f for f in families}
     cyl, plane = fams.get("cylinder"), fams.get("plane")
     # On a noisy cloud one cylinder of all the points is fitted (see one_aligned_cylinder): a
