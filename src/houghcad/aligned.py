@@ -232,18 +232,19 @@ def _largest_cone(X: np.ndarray, N: np.ndarray, lines: list[tuple[np.ndarray, np
                                   "half_angle": float(np.arctan(abs(c1k)))})
         if not cone.valid(prim, ctx):
             continue
-        on = cone.distance(prim, X) <= ctx.tau
+        dc = cone.distance(prim, X)
+        on = dc <= ctx.tau
         for _ in range(t.aligned_refits):
             fit = cone.fit(prim, X[on], N[on]) if on.sum() >= ctx.min_points else None
             if fit is None or not cone.valid(fit, ctx):
                 break
-            on2 = cone.distance(fit, X) <= ctx.tau
-            if on2.sum() < on.sum():
+            d2 = cone.distance(fit, X)
+            if (d2 <= ctx.tau).sum() < on.sum():
                 break
-            prim, on = fit, on2
+            prim, dc, on = fit, d2, d2 <= ctx.tau
         # Exact samples of a cone lie on it once its axis is free; a short arc of a torus
         # fillet, or a crease between a plane and a cylinder, fits a cone only to a share of τ.
-        if on.sum() > count and cone.distance(prim, X[on]).mean() <= t.aligned_cone_taus * ctx.tau:
+        if on.sum() > count and dc[on].mean() <= t.aligned_cone_taus * ctx.tau:
             best, count = (cone, prim, on), int(on.sum())
     return best
 

@@ -419,10 +419,11 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
     if plane is None:
         return 0
     P, N = ctx.pre.points, ctx.pre.normals
+    t = ctx.tol.consolidation
     changed = 0
     for k, s in enumerate(seg):
         if s.family.name not in ("cylinder", "cone", "sphere", "torus") or s.fixed or \
-                len(s.indices) < ctx.tol.consolidation.plane_min_points:
+                len(s.indices) < t.plane_min_points:
             continue
         Q = P[s.indices]
         c = Q.mean(axis=0)
@@ -432,7 +433,6 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
             continue
         d_own = np.minimum(s.family.distance(s.prim, Q), ctx.tau)
         d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
-        t = ctx.tol.consolidation
         if d_pl.mean() > d_own.mean() + max(t.plane_se * d_own.std() / np.sqrt(len(Q)), t.cover_taus * ctx.tau):
             continue
         seg.set_record(k, SegmentRecord(plane, prim))

@@ -161,6 +161,9 @@ WIDE_NORMALS_SPACINGS = 0.3
 #: (half as many) helped the parts more but lost types on single primitives at 0.5-1 % and
 #: DSC on the Table 5 block at σ = 0.1 and 0.2.
 NOISE_NEIGHBOURS_PER_SPACING = 80
+#: The widened neighbourhood's cap (neighbours): at 1 % of the diagonal 64 neighbours give ~5°
+#: normal errors where 16 give 25° (synthetic cylinders).
+WIDE_NORMALS_MAX = 64
 #: Quantile of the 4-point plane residuals that bounds the noise (:func:`_noise_estimate`),
 #: and the bound's factor: the quantile is 1 / 16 of σ under Gaussian noise up to 0.3 spacings.
 QUADRUPLE_QUANTILE = 0.1
@@ -352,7 +355,7 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
     Returns
     -------
     normals : ndarray, shape (n, 3), unit
-    dist : ndarray, shape (n, k) or (n, 64)
+    dist : ndarray, shape (n, k) or (n, kk), kk ≤ WIDE_NORMALS_MAX
         Neighbour distances of the neighbourhoods used (widened ones for noisy clouds).
     noise : float
         Noise estimate, re-estimated on widened neighbourhoods.
@@ -372,11 +375,11 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
     nrm, nbr, dist, noise, used = hood.normals, hood.nbr, hood.dist, hood.noise, "pca"
     widen = noise_policy == "noisy" or (noise_policy == "auto" and noise > WIDE_NORMALS_SPACINGS * hood.spacing)
     if method != "pca" and widen and len(x) > hood.k:
-        # Noisy cloud: a wider neighbourhood averages the noise out (at 1%
-        # of the diagonal, 64 neighbours give ~5° errors where 16 give 25°,
-        # measured on synthetic cylinders); the noise estimate improves too.
-        # As wide as the noise needs, no wider (NOISE_NEIGHBOURS_PER_SPACING).
-        kk = int(min(np.clip(round(NOISE_NEIGHBOURS_PER_SPACING * noise / hood.spacing), hood.k, 64), len(x)))
+        # Noisy cloud: a wider neighbourhood averages the noise out, and the noise estimate
+        # improves too; as wide as the noise needs, no wider (NOISE_NEIGHBOURS_PER_SPACING,
+        # WIDE_NORMALS_MAX).
+        want = round(NOISE_NEIGHBOURS_PER_SPACING * noise / hood.spacing)
+        kk = int(min(np.clip(want, hood.k, WIDE_NORMALS_MAX), len(x)))
         dist, nbr = hood.tree.query(x, k=kk, workers=workers)
         nrm, ev = pca_normals(x, nbr, workers)
         # Bounded by the small-neighbourhood estimate: 64 neighbours reach
