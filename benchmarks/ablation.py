@@ -69,6 +69,7 @@ SPECIAL_CASES: tuple[tuple[str, dict[str, float]], ...] = (
     ("clean_trimming", {"recognition.clean_trim_rounds": 0}),  # refits on the closer half
     ("beside_top", {"recognition.beside_top_peaks": 0}),  # stacked surfaces' lower peaks
     ("fillet_alignment", {"fillets.aligned_max_deg": 0.5}),  # short cylinders snapped to a plane's normal
+    ("facets", {"consolidation.facet_cover": 1.01}),  # loose curves split into exact planes (chamfered edges)
 )
 
 

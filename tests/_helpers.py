@@ -46,3 +46,17 @@ def state_before(points: np.ndarray, pass_name: str, **options) -> tuple[Segment
 
     fitted = Segmenter(trace=trace, **options).fit(points)
     return states.get(pass_name), fitted.context_
+
+
+def wide_cylinder(ctx: Context, flat: Candidate) -> tuple[Primitive, np.ndarray]:
+    """A cylinder of radius 50 diagonals tangent to the plane segment ``flat``
+    at its centroid (flat within any noise over the cloud), and the unit
+    vector across its axis in the plane."""
+    P = ctx.pre.points
+    n = flat.prim.params["normal"]
+    e = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+    e /= np.linalg.norm(e)
+    c0 = P.mean(axis=0)
+    R = 50.0 * ctx.pre.diagonal
+    foot = c0 - (c0 @ n - flat.prim.params["offset"]) * n
+    return Primitive("cylinder", {"axis_point": foot + R * n, "axis": e, "radius": R}), np.cross(n, e)

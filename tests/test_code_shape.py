@@ -10,7 +10,7 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src" / "houghcad"
 #: The modules of the pipeline after preprocessing: every threshold there is a
 #: named tolerance (houghcad.tolerances) or a named module constant.
-PIPELINE_MODULES = ("recognize", "splitting", "ransac", "growth", "boundaries", "adjacency", "consolidation",
+PIPELINE_MODULES = ("recognize", "splitting", "ransac", "growth", "boundaries", "adjacency", "consolidation", "planes",
                     "blend", "associate", "pipeline", "output", "context", "state", "noise")
 #: Literals that are not thresholds: nothing, one, two (halves, pairs, squares),
 #: minus one, and three (the dimension of space, in array shapes).

@@ -1,5 +1,5 @@
 """Consolidation: complex families retake carved surfaces, pieces are voted again,
-poor fits are revisited, and curved segments flat within the noise become planes."""
+poor fits are revisited."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 
 import houghcad
-from _helpers import context, plane_candidate, seed_plane
+from _helpers import context, plane_candidate, seed_plane, wide_cylinder
 from houghcad import synth
-from houghcad.consolidation import _covered, consolidate, merge_complex, prefer_planes, revisit_poor_fits
+from houghcad.consolidation import _covered, consolidate, merge_complex, revisit_poor_fits
 from houghcad.evaluate import classification_measures
 from houghcad.families import REGISTRY, select
 from houghcad.families.base import Primitive
@@ -118,20 +118,6 @@ def test_noisy_segment_fitted_worse_than_the_noise_goes_to_its_own_surface():
     assert seg.version == version and seg[0].prim is flat.prim
 
 
-def _wide_cylinder(ctx, flat):
-    """A cylinder of radius 50 diagonals tangent to the plane segment ``flat``
-    at its centroid (flat within any noise over the cloud), and the unit
-    vector across its axis in the plane."""
-    P = ctx.pre.points
-    n = flat.prim.params["normal"]
-    e = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
-    e /= np.linalg.norm(e)
-    c0 = P.mean(axis=0)
-    R = 50.0 * ctx.pre.diagonal
-    foot = c0 - (c0 @ n - flat.prim.params["offset"]) * n
-    return Primitive("cylinder", {"axis_point": foot + R * n, "axis": e, "radius": R}), np.cross(n, e)
-
-
 def test_noisy_plane_takes_back_the_wide_cylinder_on_its_face():
     # Noise lets a cylinder of radius ~50 diagonals take part of a plane face
     # beside the plane's own segment; the plane covers it and takes it back.
@@ -139,7 +125,7 @@ def test_noisy_plane_takes_back_the_wide_cylinder_on_its_face():
     ctx = context(cloud.points)
     assert ctx.noisy
     P = ctx.pre.points
-    cyl, across = _wide_cylinder(ctx, plane_candidate(ctx, np.arange(len(P))))
+    cyl, across = wide_cylinder(ctx, plane_candidate(ctx, np.arange(len(P))))
     u = (P - P.mean(axis=0)) @ across
     piece = np.flatnonzero(u > np.quantile(u, 0.6))
     d = REGISTRY["cylinder"].distance(cyl, P[piece])
@@ -164,70 +150,6 @@ def test_noisy_dome_read_as_planes_is_voted_whole_again():
     inter = len(np.intersect1d(best.indices, dome))
     assert best.type == "ellipsoid"
     assert 2 * inter / (len(best.indices) + len(dome)) >= 0.9
-
-
-def test_noisy_curved_segment_that_a_plane_fits_as_well_becomes_a_plane():
-    # A cylinder of radius 50 diagonals on a noisy plane face: flat within the noise.
-    cloud = synth.single("plane", 0, n_points=3000, noise=0.005)
-    ctx = context(cloud.points)
-    P = ctx.pre.points
-    flat = plane_candidate(ctx, np.arange(len(P)))
-    cyl, _ = _wide_cylinder(ctx, flat)
-    piece = Candidate(REGISTRY["cylinder"], cyl, flat.indices, 0.0, np.zeros(len(P)))
-    seg = Segmentation.of(len(P), [piece])
-    assert prefer_planes(seg, select("simple"), ctx) == 1
-    assert seg[0].family.name == "plane" and len(seg.indices(0)) == len(P)
-    # Without the plane family selected, nothing changes.
-    seg = Segmentation.of(len(P), [piece])
-    assert prefer_planes(seg, select("cylinder"), ctx) == 0
-    # A fixed primitive (a fillet's) keeps its family.
-    seg = Segmentation.of(len(P), [piece])
-    seg.set_record(0, replace(seg.records[0], fixed=True))
-    assert prefer_planes(seg, select("simple"), ctx) == 0
-    # A noisy cylinder (its true primitive, in the standard frame) stays one.
-    seg, ctx = _true_cylinder_segment(noise=0.005)
-    assert prefer_planes(seg, select("simple"), ctx) == 0
-    assert seg[0].family.name == "cylinder"
-
-
-def _true_cylinder_segment(noise: float) -> tuple[Segmentation, object]:
-    """A single synthetic cylinder as one segment holding its true primitive (standard frame),
-    and the run context."""
-    cloud = synth.single("cylinder", 0, n_points=3000, noise=noise)
-    ctx = context(cloud.points)
-    T = ctx.pre.transform
-    g = cloud.primitives[0]["params"]
-    prim = Primitive("cylinder", {"axis_point": T.points(np.asarray(g["axis_point"])[None])[0],
-                                  "axis": T.dirs(np.asarray(g["axis"])[None])[0], "radius": T.scale * g["radius"]})
-    idx = np.flatnonzero(cloud.labels == 0)
-    seg = Segmentation.of(len(cloud.points), [Candidate(REGISTRY["cylinder"], prim, idx, 0.0, np.zeros(len(idx)))])
-    return seg, ctx
-
-
-def test_an_exact_strip_two_rows_wide_read_as_a_cylinder_becomes_a_plane():
-    # Two rows of exact samples lie on a plane and on every cylinder through both rows; the
-    # simpler surface is taken. An exact cylinder over many rows stays a cylinder.
-    x = np.arange(40.0)
-    strip = np.c_[np.r_[x, x + 0.5], np.r_[np.zeros(40), np.ones(40)], np.zeros(80)]
-    gx, gy = np.meshgrid(np.arange(20.0), np.arange(20.0))
-    plate = np.c_[gx.ravel(), gy.ravel() + 5.0, np.full(gx.size, 3.0)]
-    ctx = context(np.r_[strip, plate])
-    P = ctx.pre.points
-    idx = np.arange(80)
-    Q = P[idx]
-    axis = Q[39] - Q[0]
-    axis /= np.linalg.norm(axis)
-    across = Q[40] - Q[0] - ((Q[40] - Q[0]) @ axis) * axis
-    normal = np.cross(axis, across / np.linalg.norm(across))
-    w, h = np.linalg.norm(across), 4.0 * np.linalg.norm(across)
-    centre = Q[0] + across / 2 - h * normal
-    cyl = Primitive("cylinder", {"axis_point": centre, "axis": axis, "radius": float(np.hypot(w / 2, h))})
-    assert REGISTRY["cylinder"].distance(cyl, Q).max() < 1e-9
-    seg = Segmentation.of(len(P), [Candidate(REGISTRY["cylinder"], cyl, idx, 0.0, np.zeros(80))])
-    assert prefer_planes(seg, select("simple"), ctx) == 1
-    assert seg[0].family.name == "plane"
-    seg, ctx = _true_cylinder_segment(noise=0.0)
-    assert prefer_planes(seg, select("simple"), ctx) == 0
 
 
 def test_a_torus_cut_into_bands_is_joined_again():

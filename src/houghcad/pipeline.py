@@ -22,7 +22,7 @@ from . import families as fam_mod
 from .associate import Associator
 from .blend import find_fillets
 from .boundaries import dissolve_redundant, settle_edges, settle_noisy_edges
-from .consolidation import consolidate, prefer_planes, revisit_poor_fits
+from .consolidation import consolidate, revisit_poor_fits
 from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
 from .errors import InputError
 from .parallel import Workers, resolve_jobs
@@ -34,6 +34,7 @@ from .preprocess import preprocess
 from .recognize import recognize, refine
 from .result import Result
 from .splitting import splitting_phase
+from .planes import prefer_planes
 from .passes import EXTENSION, PAPER_5_2, PAPER_5_3, PAPER_5_4, Pass, Run, Runner, TraceFn, monotonic
 from .state import SegmentRecord, Segmentation, checks_enabled
 from .tolerances import Tolerances
@@ -142,7 +143,9 @@ def fillets_pass(seg: Segmentation, run: Run) -> Segmentation:
 
 
 def prefer_planes_pass(seg: Segmentation, run: Run) -> Segmentation:
-    """Noisy clouds: curved primitives flat within the noise are planes."""
+    """Curved primitives that a plane fits as well are planes (flat within
+    the noise, or exact strips); loosely fitted ones that planes fit exactly
+    go to the planes."""
     prefer_planes(seg, run.families, run.ctx)
     return seg
 

@@ -201,8 +201,16 @@ class ConsolidationTolerances:
     own_fit_ratio: float = tol(1.5, "ratio", "or no worse than this times the covering segment's fit to its own points")
     strict_se: float = tol(1.5, "standard errors", "noisy clouds: over all the piece's points, within this of the "
                            "piece's own fit")
-    plane_min_points: int = tol(10, "points", "curved segments smaller than this keep their family")
+    plane_min_points: int = tol(10, "points", "curved segments smaller than this are not offered one plane")
     plane_se: float = tol(2.0, "standard errors", "a plane takes a curved segment unless it fits clearly worse")
+    facet_exact_ratio: float = tol(2.0, "cover_taus", "a curved segment fitted worse than this many roundings of "
+                                   "exact fits is loose: planes may take it in strips")
+    facet_cover: float = tol(0.9, "share", "the planes must hold this much of a loose segment to the rounding of exact "
+                             "fits to take it")
+    facet_max_planes: int = tol(4, "planes", "a group goes to at most this many planes (a chamfered edge: the two "
+                                "faces' rows and the chamfer)")
+    facet_samples: int = tol(256, "planes", "planes through three points drawn per plane found")
+    facet_score_points: int = tol(2000, "points", "planes are scored on at most this many points")
 
 
 @dataclass(frozen=True)
