@@ -440,3 +440,27 @@ def test_no_merge_option_keeps_parts_as_segments():
     # Every point keeps its owner: merging only relabels.
     assert np.array_equal(np.sort(np.concatenate([s.indices for s in raw.segments])),
                           np.sort(np.concatenate([s.indices for s in merged.segments])))
+
+
+def test_short_pieces_of_a_face_apart_by_a_hole_in_its_sampling_are_one_part():
+    # Two pieces of a plane strip six spacings wide, end to end, apart by 1.2 links where the
+    # random sample left no point: no row (the bridge rule), and short of the link (the contact
+    # rule), but nothing lies between them. A slot's wall between them parts them.
+    rng = np.random.default_rng(7)
+    W = np.column_stack([rng.uniform(-2, 2, 6000), np.zeros(6000) - 0.5, rng.uniform(-1.5, 0, 6000)])
+    spacing = float(np.median(cKDTree(W).query(W, k=2)[0][:, 1]))
+    reach = float(np.median(cKDTree(W).query(W, k=7)[0][:, 6]))
+    link, w = max(2 * spacing, 1.5 * reach), 6 * spacing
+    L, g = 150 * spacing ** 2 / w, 1.2 * link
+    A = np.column_stack([rng.uniform(-L, 0, 150), rng.uniform(0, w, 150), np.zeros(150)])
+    B = np.column_stack([rng.uniform(g, g + L, 150), rng.uniform(0, w, 150), np.zeros(150)])
+    plane = _world_prim("plane", normal=Z, point=[0, 0, 0])
+    wall = (W, _world_prim("plane", normal=Y, point=[0, -0.5, 0]))
+    for gap_links, parts in ((1.5, 1), (0.0, 2)):  # 0: the rule off
+        a = _associate([(A, plane), (B, plane), wall], gap_links=gap_links)
+        merged = next(it for it in a.items_ if sorted(it.members) == [0, 1])
+        assert len(merged.parts) == parts
+    rib = np.column_stack([np.full(8, g / 2), np.linspace(0, w, 8), np.full(8, -0.2 * link)])
+    a = _associate([(A, plane), (B, plane), wall, (rib, _world_prim("plane", normal=X, point=[g / 2, 0, 0]))])
+    merged = next(it for it in a.items_ if sorted(it.members) == [0, 1])
+    assert len(merged.parts) == 2

@@ -1,11 +1,16 @@
-"""Rows of points of narrow faces (houghcad.bridges); the bridging itself is tested through the
-association in test_associate.py (a strip and a ring cut by gaps, faces that taper to a point)."""
+"""Rows of points of narrow faces and gaps of the sampling (houghcad.bridges); the bridging itself
+is tested through the association in test_associate.py (a strip and a ring cut by gaps, faces that
+taper to a point)."""
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import replace
 
-from houghcad.bridges import ring_row, row_axis, row_direction, row_shape
+import numpy as np
+from scipy.spatial import cKDTree
+
+from houghcad.bridges import ring_row, row_axis, row_direction, row_shape, sampling_gaps
+from houghcad.tolerances import AssociationTolerances
 
 
 def _ring(rng: np.random.Generator, r0: float, width: float, turn: tuple[float, float], n: int) -> np.ndarray:
@@ -51,3 +56,37 @@ def test_a_wide_face_and_a_tapering_one_are_no_rows():
     corner = np.column_stack([Q, np.zeros(len(Q))])
     assert row_axis(corner, 0.1) is None and ring_row(corner, 0.1) is None
     assert row_shape(corner, 0.1) is None
+
+
+def _two_strips(gap: float, rng: np.random.Generator, width: float = 0.05, n: int = 60) \
+        -> tuple[np.ndarray, list[np.ndarray]]:
+    """Random samples of two strips of the plane z = 0 end to end, [0, 1] × [0, width] and
+    [1 + gap, 2 + gap] × [0, width], n points each, and their index arrays."""
+    a = np.c_[rng.uniform(0, 1, n), rng.uniform(0, width, n), np.zeros(n)]
+    b = np.c_[rng.uniform(1 + gap, 2 + gap, n), rng.uniform(0, width, n), np.zeros(n)]
+    return np.r_[a, b], [np.arange(n), np.arange(n, 2 * n)]
+
+
+def test_pieces_of_a_face_apart_by_a_gap_of_the_sampling_are_one_part():
+    tol, link = AssociationTolerances(), 0.2
+    rng = np.random.default_rng(0)
+    owner = np.r_[np.zeros(60, int), np.ones(60, int)]
+    for gap, joined in ((1.0 * link, True), (2.0 * link, False)):
+        P, pieces = _two_strips(gap, rng)
+        assert (sampling_gaps([0, 1], pieces, owner, P, cKDTree(P), link, tol) == {(0, 1)}) is joined, gap
+    # A third face between them (a rib's top, owned by another segment) parts them ...
+    P, pieces = _two_strips(1.0 * link, rng)
+    rib = np.c_[np.full(5, 1 + 0.5 * link), np.linspace(0, 0.05, 5), np.full(5, 0.05)]
+    P = np.r_[P, rib]
+    owner3 = np.r_[owner, np.full(5, 2)]
+    assert sampling_gaps([0, 1], pieces, owner3, P, cKDTree(P), link, tol) == set()
+    # ... and so do points no face explains.
+    owner3[120:] = -1
+    assert sampling_gaps([0, 1], pieces, owner3, P, cKDTree(P), link, tol) == set()
+    # Wide faces facing each other across the gap all along are parted by a boundary (a groove
+    # too narrow to be sampled), not by a hole in the sampling.
+    P, pieces = _two_strips(1.2 * link, rng, width=1.0, n=400)
+    owner = np.r_[np.zeros(400, int), np.ones(400, int)]
+    assert sampling_gaps([0, 1], pieces, owner, P, cKDTree(P), link, tol) == set()
+    tol = replace(tol, gap_front=10.0)  # the same pieces, were a front that long a hole
+    assert sampling_gaps([0, 1], pieces, owner, P, cKDTree(P), link, tol) == {(0, 1)}

@@ -39,7 +39,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .families.base import Family, Frame, Primitive, regular_indices, unit
 from .adjacency import SegmentGraph
-from .bridges import ROW_PERCENTILES, ROW_POINTS, bridged
+from .bridges import ROW_PERCENTILES, ROW_POINTS, bridged, sampling_gaps
 from .state import SegmentView
 from .tolerances import AssociationTolerances
 
@@ -218,6 +218,9 @@ class Associator:
                  for c in cands]
         self._own = [self._mean_residual(c.family, c.prim, c.indices) for c in cands]
         adjacency = self._adjacency(cands, link)
+        owner = np.full(len(pre.points), -1, dtype=np.int64)
+        for k, c in enumerate(cands):
+            owner[c.indices] = k
         surfaces = self._surfaces(cands)
 
         items: list[Item] = []
@@ -229,8 +232,9 @@ class Associator:
                 continue
             idx = np.sort(np.concatenate([cands[m].indices for m in members]))
             prim = self._refit(cands[members[0]].family, cands[members[0]].prim, idx)
-            gaps = bridged([cands[m].indices for m in members], self._pre.points, self._pre.tree,
-                           cands[members[0]].family, prim, link, self.tol)
+            pieces = [cands[m].indices for m in members]
+            gaps = bridged(pieces, self._pre.points, self._pre.tree, cands[members[0]].family, prim, link, self.tol)
+            gaps |= sampling_gaps(members, pieces, owner, self._pre.points, self._pre.tree, link, self.tol)
             parts_of = self._parts(members, adjacency | {(members[i], members[j]) for i, j in gaps})
             same.append((members, len(parts_of)))
             parts = [np.sort(np.concatenate([cands[m].indices for m in p])) for p in parts_of]

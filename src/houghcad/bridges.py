@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 from .families.base import Family, Primitive, unit
 from .tolerances import AssociationTolerances
 
-__all__ = ["bridged", "ring_row", "row_axis", "row_direction", "row_shape"]
+__all__ = ["bridged", "ring_row", "row_axis", "row_direction", "row_shape", "sampling_gaps"]
 
 #: A row's width spans the central 95 % of its points across it: a few edge points a piece took
 #: from its neighbour do not widen it.
@@ -116,4 +116,41 @@ def bridged(pieces: list[np.ndarray], P: np.ndarray, tree: cKDTree, family: Fami
                     not np.all(np.isfinite(tree.query(S, distance_upper_bound=link)[0])):
                 continue
             out.add((a, b))
+    return out
+
+
+def sampling_gaps(members: list[int], pieces: list[np.ndarray], owner: np.ndarray, P: np.ndarray, tree: cKDTree,
+                  link: float, tol: AssociationTolerances) -> set[tuple[int, int]]:
+    """Pairs (i < j) of ``pieces`` (index arrays into P (n, 3), of the segments ``members`` of
+    one surface; ``owner`` (n,) gives every point's segment, -1 free) apart by a gap of the
+    sampling: as the contact rule asks within the link (``contact`` × √(points of the smaller)
+    on each side, a boundary, not a corner), within ``gap_links`` × ``link``; when they are
+    apart by more than the link, along no more than ``gap_front`` × √(points of the smaller)
+    (a hole, not a boundary all along); and no point but theirs within half a link of the
+    middle of the gap between their nearest points.
+
+    Random samples of a face leave gaps a little wider than the link, which part its pieces
+    as DBSCAN does; two faces of one surface are parted by something between them (a slot's
+    walls, a rib, points no face explains), or meet at a corner.
+    """
+    out: set[tuple[int, int]] = set()
+    reach = tol.gap_links * link
+    trees = [cKDTree(P[idx]) for idx in pieces]
+    for i in range(len(pieces)):
+        for j in range(i + 1, len(pieces)):
+            d, nn = trees[j].query(P[pieces[i]], distance_upper_bound=reach)
+            k = int(np.argmin(d))
+            if not np.isfinite(d[k]):
+                continue
+            front = np.array([np.isfinite(d).sum(),
+                              np.isfinite(trees[i].query(P[pieces[j]], distance_upper_bound=reach)[0]).sum()])
+            root = np.sqrt(min(len(pieces[i]), len(pieces[j])))
+            # A corner, not a boundary; or, beyond the link, a boundary all along (a groove
+            # too narrow to be sampled), not a hole.
+            if front.min() < tol.contact * root or d[k] > link and front.max() > tol.gap_front * root:
+                continue
+            mid = 0.5 * (P[pieces[i][k]] + P[pieces[j][nn[k]]])
+            near = owner[tree.query_ball_point(mid, 0.5 * link)]
+            if np.all((near == members[i]) | (near == members[j])):
+                out.add((i, j))
     return out

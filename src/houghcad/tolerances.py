@@ -266,6 +266,10 @@ class AssociationTolerances:
                               "surface")
     bridge_angle: float = tol(25.0, "degrees", "a gap in a narrow face's sampling continues its row of points: "
                               "the pieces' axes are within this of the gap's direction")
+    gap_links: float = tol(1.5, "links", "pieces of one surface this close, with no third segment between them, are "
+                           "one part apart by a gap of the sampling")
+    gap_front: float = tol(1.0, "√(points of the smaller)", "... along a front of at most this many points beyond "
+                           "the link: a hole in the sampling, not a boundary all along")
     bridge_reach: float = tol(3.0, "links", "a row's direction at a gap is read from its points this close to "
                               "it: rings and arcs of narrow faces turn along their length")
     propose_lengths: float = tol(4.0, "length tolerances", "same-surface proposals are generous; the union refit "
