@@ -466,6 +466,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", type=Path, default=CACHE, help="folder of the per-variant CSVs (default %(default)s)")
     ap.add_argument("--report-only", action="store_true", help="compute nothing: the table of the cached variants")
     a = ap.parse_args(argv)
+    if not (a.list or a.report_only or a.fit4cad.is_dir()):
+        # Without the clouds every variant would be measured on the synthetic cases alone, and
+        # its cached rows would read as if no Fit4CAD cloud could change.
+        print(f"ablation.py: no Fit4CAD folder at {a.fit4cad}; give it with --fit4cad", file=sys.stderr)
+        return 2
     order = variants()
     cache = a.cache
     cache.mkdir(parents=True, exist_ok=True)
