@@ -217,10 +217,10 @@ class Associator:
         cands = [c if c.fixed else replace(c, prim=self._refit(c.family, c.prim, np.sort(c.indices)))
                  for c in cands]
         self._own = [self._mean_residual(c.family, c.prim, c.indices) for c in cands]
-        adjacency = self._adjacency(cands, link)
-        owner = np.full(len(pre.points), -1, dtype=np.int64)
+        owner = np.full(len(pre.points), -1, dtype=np.int64)  # each point's segment, -1 free
         for k, c in enumerate(cands):
             owner[c.indices] = k
+        adjacency = self._adjacency(cands, owner, link)
         surfaces = self._surfaces(cands)
 
         items: list[Item] = []
@@ -270,7 +270,7 @@ class Associator:
             out = None
         return out if out is not None else prim
 
-    def _adjacency(self, cands: list[SegmentView], link: float) -> set[tuple[int, int]]:
+    def _adjacency(self, cands: list[SegmentView], owner: np.ndarray, link: float) -> set[tuple[int, int]]:
         """Pairs (i < j) of segments in contact along a line, not at a point.
 
         Points closer than ``link`` to the other segment are the contact. Two
@@ -279,14 +279,12 @@ class Associator:
         at a corner touch at a few points. A line contact holds at least
         ``contact`` × √(points of the smaller) points on each side; fewer on
         either side is a point contact, or two faces a little more than
-        ``link`` apart that come close at a few points.
+        ``link`` apart that come close at a few points. ``owner`` (n,): each
+        point's segment (its position in ``cands``), -1 free.
         """
         if len(cands) < 2:
             return set()
-        labels = np.full(len(self._pre.points), -1, dtype=np.int64)
-        for k, c in enumerate(cands):
-            labels[c.indices] = k
-        g = SegmentGraph.build(labels, self._pre.points, link)
+        g = SegmentGraph.build(owner, self._pre.points, link)
         sizes = np.array([len(c.indices) for c in cands])
         least = g.contact.min(axis=1)
         u, v = g.edges[:, 0], g.edges[:, 1]

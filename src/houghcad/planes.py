@@ -50,8 +50,7 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
         Q = P[s.indices]
         d_own = np.minimum(s.family.distance(s.prim, Q), ctx.tau)
         if len(Q) >= t.plane_min_points:
-            c = Q.mean(axis=0)
-            n0 = np.linalg.eigh(np.cov(Q.T))[1][:, 0]
+            n0, c = _pca_plane(Q)
             prim = plane.fit(Primitive("plane", {"normal": n0, "offset": float(n0 @ c)}), Q, N[s.indices])
             if prim is not None:
                 d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
@@ -103,7 +102,8 @@ def split_into_facets(seg: Segmentation, loose: dict[int, np.ndarray], plane: Fa
         planes = exact_planes(P[idx], exact, ctx.min_points, ctx, rng)
         if not planes:
             continue
-        near = np.stack([plane.distance(p, P[idx]) for p in planes]).min(axis=0)
+        dist = np.stack([plane.distance(p, P[idx]) for p in planes])
+        near = dist.min(axis=0)
         member = np.repeat(np.arange(len(group)), [len(loose[k]) for k in group])
         on = np.bincount(member, weights=near <= exact, minlength=len(group))
         fit = np.bincount(member, weights=np.minimum(near, ctx.tau), minlength=len(group))
@@ -111,18 +111,19 @@ def split_into_facets(seg: Segmentation, loose: dict[int, np.ndarray], plane: Fa
         own = np.array([loose[k].mean() for k in group])
         goes = (on >= t.facet_cover * sizes) & (fit / sizes + exact <= own)
         if goes.any():
-            gone += _give(seg, [k for k, go in zip(group, goes) if go], idx[goes[member]], planes, plane, ctx)
+            gone += _give(seg, [k for k, go in zip(group, goes) if go], idx[goes[member]], planes,
+                          dist[:, goes[member]], plane, ctx)
     seg.remove_empty()
     return gone
 
 
-def _give(seg: Segmentation, members: list[int], idx: np.ndarray, planes: list[Primitive], plane: Family,
-          ctx: Context) -> int:
-    """The segments ``members`` (their points ``idx``) become the planes that
-    hold at least ``min_points`` of them; each point goes to its nearest
-    plane within τ, or is freed (a row of a neighbour the curve held)."""
-    P = ctx.pre.points
-    dist = np.stack([plane.distance(p, P[idx]) for p in planes])
+def _give(seg: Segmentation, members: list[int], idx: np.ndarray, planes: list[Primitive], dist: np.ndarray,
+          plane: Family, ctx: Context) -> int:
+    """The segments ``members`` (their points ``idx``, at distances ``dist``
+    (planes, m) from the ``planes``) become the planes that hold at least
+    ``min_points`` of them; each point goes to its nearest plane within τ, or
+    is freed (a row of a neighbour the curve held). Members beyond the planes
+    are left empty."""
     for _ in range(len(planes)):
         counts = np.bincount(dist.argmin(axis=0), minlength=len(planes))
         if counts.min() >= ctx.min_points:
@@ -140,8 +141,6 @@ def _give(seg: Segmentation, members: list[int], idx: np.ndarray, planes: list[P
             seg.set_points(members[j], idx[near == j])
         else:
             seg.add(SegmentRecord(plane, p), idx[near == j])
-    for k in members[len(planes):]:
-        seg.release(seg.indices(k))
     return len(members)
 
 
@@ -173,11 +172,16 @@ def exact_planes(Q: np.ndarray, exact: float, min_points: int, ctx: Context, rng
         on = left[np.abs(Q[left] @ nrm[b] - off[b]) <= exact]
         if len(on) < max(3, min_points):
             break
-        c = Q[on].mean(axis=0)
-        n = np.linalg.eigh(np.cov(Q[on].T))[1][:, 0]
+        n, c = _pca_plane(Q[on])
         on = left[np.abs((Q[left] - c) @ n) <= exact]
         if len(on) < min_points:
             break
         out.append(Primitive("plane", {"normal": n, "offset": float(n @ c)}))
         left = np.setdiff1d(left, on)
     return out
+
+
+def _pca_plane(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares plane of the points Q (m, 3): its unit normal (3,), their least
+    principal direction, and their centroid (3,), which it passes through."""
+    return np.linalg.eigh(np.cov(Q.T))[1][:, 0], Q.mean(axis=0)
