@@ -9,6 +9,7 @@ from scipy.spatial import cKDTree
 
 import houghcad
 from _helpers import context, plane_candidate, state_before
+from houghcad.context import Context
 from houghcad import synth
 from houghcad.boundaries import _sides, dissolve_redundant, settle_edges, settle_noisy_edges
 from houghcad.families import REGISTRY
@@ -252,3 +253,42 @@ def test_settle_edges_compares_cores_not_sizes():
     # (one round moved 32 of these 35).
     right = band[(band >= n_arc) & (d_plane[band] > 2 * ctx.tau)]
     assert len(right) >= 20 and (seg.labels[right] == 2).all()
+
+
+def _pieces_and_sliver(min_points: int) -> tuple[Segmentation, Context, np.ndarray]:
+    """24 neighbouring points of one plane face: two exact plane pieces of 7 points around a
+    10-point sliver, fitted by a plane tilted across the face (off by up to about 0.1 τ)."""
+    cloud = synth.plate_with_holes(seed=0, n_points=3000)
+    ctx = replace(context(cloud.points), min_points=min_points)
+    face = np.flatnonzero(cloud.labels == [p["name"] for p in cloud.primitives].index("box -z"))
+    P = ctx.pre.points
+    centre = P[face].mean(axis=0)
+    near = face[np.argsort(np.linalg.norm(P[face] - centre, axis=1), kind="stable")[:24]]
+    sliver, rest = near[:10], near[10:]
+    rest = rest[np.argsort(np.arctan2(*(P[rest] - centre)[:, :2].T), kind="stable")]
+    exact = plane_candidate(ctx, face)
+    n = exact.prim.params["normal"]
+    tilt = n + 0.1 * ctx.tau / np.ptp(P[sliver][:, 0]) * np.array([1.0, 0.0, 0.0])
+    tilt /= np.linalg.norm(tilt)
+    c = P[sliver].mean(axis=0)
+    fam = REGISTRY["plane"]
+    tilted = Primitive("plane", {"normal": tilt, "offset": float(tilt @ c), "point": c})
+    pieces = [replace(exact, indices=rest[:7]), replace(exact, indices=rest[7:]),
+              Candidate(fam, tilted, sliver, 0.0, np.zeros(len(sliver)))]
+    return Segmentation.of(len(P), pieces), ctx, sliver
+
+
+def test_a_sliver_across_two_smaller_pieces_of_a_face_goes_to_them():
+    # Pieces of a segment's size, each smaller than the sliver, fit its points exactly: the
+    # sliver goes, though no neighbour outnumbers it.
+    seg, ctx, sliver = _pieces_and_sliver(min_points=6)
+    assert seg.sizes().tolist() == [7, 7, 10]
+    dissolve_redundant(seg, ctx, max(0.3 * ctx.spacing, ctx.tau), ctx.link)
+    seg.check()
+    assert len(seg) == 2 and (seg.labels[sliver] >= 0).all()
+
+
+def test_a_sliver_stays_when_its_neighbours_are_neither_larger_nor_of_a_segments_size():
+    seg, ctx, _ = _pieces_and_sliver(min_points=8)
+    dissolve_redundant(seg, ctx, max(0.3 * ctx.spacing, ctx.tau), ctx.link)
+    assert seg.sizes().tolist() == [7, 7, 10]

@@ -96,3 +96,7 @@ def test_the_smallest_segment_is_a_size_on_the_part():
     # A sparse cloud keeps the floor: fewer points do not pin a primitive down.
     small = preprocess(synth.gear_like(seed=0, n_points=4_000).points)
     assert derive_context(small, 4_000, t, CLEAN).min_points == t.scale.min_points_floor
+    # On a noisy cloud the floor is higher: a handful of noisy points fits some primitive.
+    from houghcad.noise import NOISY
+    assert derive_context(small, 4_000, t, NOISY).min_points == t.scale.noisy_min_points_floor
+    assert t.scale.noisy_min_points_floor > t.scale.min_points_floor

@@ -258,10 +258,12 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
     both faces) gets its own primitive in the splitting phase, fitted worse
     than the faces fit the same points. A segment smaller than ``3 *
     min_points`` is dissolved when every point lies within ``delta`` of a
-    larger adjacent segment's surface (neighbours within ``reach``) and those
-    distances are on average below its own; each point goes to the nearest
-    such surface. A narrow true face (a fillet) fits its own points at least
-    as well and stays.
+    larger adjacent segment's surface, or one of a segment's size (neighbours
+    within ``reach``), and those distances are on average below its own; each
+    point goes to the nearest such surface. A narrow true face (a fillet) fits
+    its own points at least as well and stays. (A face cut in pieces of a few
+    points each gives a sliver across them more points than either piece,
+    though it fits them worse than both.)
     """
     if len(seg) < 2:
         return
@@ -278,7 +280,8 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
         _, nb = ctx.pre.tree.query(P[idx], k=min(ctx.tol.boundaries.neighbours, len(P)), distance_upper_bound=reach)
         nb = nb[nb < len(P)]
         adj = np.unique(owner[nb])
-        adj = [int(a) for a in adj if a >= 0 and a != j and a not in gone and sizes[a] > sizes[j]]
+        adj = [int(a) for a in adj
+               if a >= 0 and a != j and a not in gone and (sizes[a] > sizes[j] or sizes[a] >= ctx.min_points)]
         if not adj:
             continue
         d = np.stack([seg[a].family.distance(seg[a].prim, P[idx]) for a in adj])

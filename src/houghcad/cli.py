@@ -111,7 +111,8 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--persistence", type=_open_fraction, default=None, metavar="F",
                    help="peak persistence threshold, a fraction of the accumulator's maximum in (0, 1) (default: 0.1)")
     p.add_argument("--min-points", type=_positive_int, default=None, metavar="N",
-                   help="smallest segment in points (default: a patch 1.5 %% of the diagonal wide, at least 8)")
+                   help="smallest segment in points (default: a patch 1.5 %% of the diagonal wide, at least 6, "
+                        "8 on noisy clouds)")
     p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
                    help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
                    "docs/tolerances.md lists them")

@@ -148,8 +148,9 @@ def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: No
     eps = eps_taus * tau if epsilon is None else float(epsilon) * pre.diagonal
     tau = min(tau, eps)
     angle = np.radians(min(t.angle_max_deg, t.angle_deg + t.angle_deg_per_noise * pre.noise / max(s, _TINY)))
+    floor = t.noisy_min_points_floor if policy.larger_segments else t.min_points_floor
     mp = min_points if min_points is not None else \
-        max(t.min_points_floor, int(points_in_patch(pre, t.min_face_diagonals * pre.diagonal)))
+        max(floor, int(points_in_patch(pre, t.min_face_diagonals * pre.diagonal)))
     return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle),
                    link=max(t.link_spacings * s, t.link_reach * pre.reach) + t.link_sigmas * pre.noise,
                    cell=max(tau, t.cell_spacings * s), min_points=int(mp), max_radius=t.max_radius,

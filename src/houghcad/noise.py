@@ -83,6 +83,11 @@ class NoisePolicy:
         levels: a band ±τ (3 σ) holds most of a small noisy cluster whatever
         its shape, so the best of many draws is a chance fit (a generalised
         cone's pieces came out as planes and cylinders of a dozen points).
+    larger_segments : bool
+        The smallest segment is ``scale.noisy_min_points_floor`` points, not
+        ``scale.min_points_floor``: a handful of noisy points fits some
+        primitive of its own within the noise (a noisy groove's walls came
+        out as scraps of 6-16 points with the clean floor).
     """
 
     name: str
@@ -99,14 +104,15 @@ class NoisePolicy:
     nearest_edges: bool
     torus_grid_from_points: bool
     one_aligned_cylinder: bool
+    larger_segments: bool
 
     @property
     def noisy(self) -> bool:
         return self.name == "noisy"
 
 
-CLEAN = NoisePolicy("clean", *([False] * 13))
-NOISY = NoisePolicy("noisy", *([True] * 13))
+CLEAN = NoisePolicy("clean", *([False] * 14))
+NOISY = NoisePolicy("noisy", *([True] * 14))
 
 
 def choose(noise: str, sigma: float, spacing: float) -> NoisePolicy:

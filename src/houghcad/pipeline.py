@@ -236,7 +236,7 @@ class Segmenter:
         Peak persistence threshold, a fraction of the accumulator's maximum.
     min_points : int, optional
         Smallest segment; default the points of a patch ``min_face_diagonals`` (1.5 %) of the
-        diagonal wide at the cloud's density, at least 8 (see ``context.points_in_patch``).
+        diagonal wide at the cloud's density, at least 6, 8 on noisy clouds (see ``context.points_in_patch``).
     seed : int
         Seed of every random choice.
     progress : callable, optional

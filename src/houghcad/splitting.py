@@ -84,12 +84,18 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
             # normal lines meet between the fillets' centres) they fit none: each candidate then
             # keeps a slice. RANSAC's regions grow from minimal samples of one surface; the split
             # that explains the cluster in larger pieces is taken.
-            if got and _wants_ransac(got, seen[k], ctx):
+            fragmented = bool(got) and _wants_ransac(got, seen[k], ctx)
+            if fragmented:
                 alt = _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0), avail, ctx)
                 if _piece_score(alt) > _piece_score(found):
                     found = alt
-            if not found:
-                found = aligned_features(cl, families, seg, lctx)
+            # The features aligned with the neighbours compete with fragments in the same way (a
+            # small torus through a countersink and its hole would hide the cone and cylinder
+            # about the hole's axis).
+            if not found or fragmented:
+                alt = aligned_features(cl, families, seg, lctx)
+                if _piece_score(alt) > _piece_score(found):
+                    found = alt
             if not found and not got:
                 found = _still_free(own_normals_recognised(seen[k], families, lctx, free0), avail, ctx)
             if not found and not got and _wants_ransac(got, seen[k], ctx):

@@ -51,7 +51,12 @@ class ScaleTolerances:
     link_sigmas: float = tol(2.0, "σ", "noise spreads the points across the surface, widening the gaps")
     cell_spacings: float = tol(0.5, "spacings", "accumulator cell for lengths: finer than the sampling resolves "
                                "only splits the votes")
-    min_points_floor: int = tol(8, "points", "smallest segment: fewer points do not pin down a primitive")
+    min_points_floor: int = tol(6, "points", "smallest segment: the fewest points that still show a misfit of "
+                                "a plane, sphere or cylinder (3, 4, 5 parameters); 8 lost faces of 6-7 points on "
+                                "sparse clouds (Fit4CAD: every fold up at 6, at full density and at 35 %; 4 "
+                                "over-segments the sparse clouds)")
+    noisy_min_points_floor: int = tol(8, "points", "smallest segment on noisy clouds: a handful of noisy points "
+                                      "fits some primitive of its own within the noise")
     min_face_diagonals: float = tol(0.015, "diagonals", "smallest face: a patch this wide, in points at the "
                                     "cloud's density (at least min_points_floor); a size on the part, whatever "
                                     "its sampling density")
