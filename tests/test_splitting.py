@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import houghcad
-from _helpers import context
+from _helpers import context, plane_candidate
 from houghcad import synth
 from houghcad.families import select
 from houghcad.families.base import Primitive
@@ -156,3 +156,32 @@ def test_a_wall_end_rounded_by_two_fillets_comes_out_as_its_faces():
     outer, inner = m["per_segment"]["DSC"][4:6]
     assert outer >= 0.85 and inner >= 0.85
     assert m["DSC"] >= 0.9
+
+
+def test_where_the_vote_finds_nothing_the_fallback_in_larger_pieces_is_taken(monkeypatch):
+    # A cylinder sampled in rows whose rows lie at levels across a neighbour's normal: the
+    # aligned features offer planes of a few rows, RANSAC the cylinder through all of them. The
+    # fallbacks compete as the RANSAC split competes with fragments: larger pieces win.
+    import houghcad.splitting as sp
+    from houghcad.state import mean_fitting_error
+
+    cloud = synth.PARTS["plate_with_holes"](seed=0, n_points=3000)
+    ctx = context(cloud.points)
+    k = [p["name"] for p in cloud.primitives].index("hole 0")
+    hole = np.flatnonzero(cloud.labels == k)
+    P, N = ctx.pre.points, ctx.pre.normals
+    cyl = REGISTRY["cylinder"]
+    prim = cyl.fit(Primitive("cylinder", dict(cloud.primitives[k]["params"])), P[hole], N[hole])
+    d = cyl.distance(prim, P[hole])
+    whole = Candidate(cyl, prim, hole, mean_fitting_error(d, P[hole]), d)
+    rest = np.setdiff1d(np.arange(len(P)), hole)
+    seg = Segmentation.of(len(P), [plane_candidate(ctx, rest)])
+
+    monkeypatch.setattr(sp, "recognize", lambda *a, **kw: [])
+    monkeypatch.setattr(sp, "aligned_features",
+                        lambda cl, *a, **kw: [plane_candidate(ctx, cl[:12]), plane_candidate(ctx, cl[12:19])])
+    monkeypatch.setattr(sp, "ransac_recognised", lambda *a, **kw: [whole])
+    splitting_phase(seg, select("simple"), ctx)
+    seg.check()
+    assert len(seg) == 2 and seg[1].family.name == "cylinder"
+    assert (seg.labels[hole] == 1).all()

@@ -96,10 +96,18 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
                 alt = aligned_features(cl, families, seg, lctx)
                 if _piece_score(alt) > _piece_score(found):
                     found = alt
-            if not found and not got:
-                found = _still_free(own_normals_recognised(seen[k], families, lctx, free0), avail, ctx)
-            if not found and not got and _wants_ransac(got, seen[k], ctx):
-                found = _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0), avail, ctx)
+            # A cluster the vote found nothing in: its crease normals read again from its own
+            # points, and the RANSAC fallback, compete with the aligned features in the same
+            # way (the rows of a cylinder sampled in rows lie on levels across its neighbour's
+            # normal, a few points each: the cylinder through all of them explains more).
+            if not got:
+                alt = _still_free(own_normals_recognised(seen[k], families, lctx, free0), avail, ctx)
+                if _piece_score(alt) > _piece_score(found):
+                    found = alt
+                if _wants_ransac(got, seen[k], ctx):
+                    alt = _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0), avail, ctx)
+                    if _piece_score(alt) > _piece_score(found):
+                        found = alt
             accept(found, seg, ctx)
             found_any |= bool(found)
             if found:
