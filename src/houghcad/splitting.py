@@ -82,32 +82,23 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
             # well. The placements come from the cluster's normals, and where several surfaces
             # share them (a wall end rounded by two fillets with a narrow flat between: their
             # normal lines meet between the fillets' centres) they fit none: each candidate then
-            # keeps a slice. RANSAC's regions grow from minimal samples of one surface; the split
+            # keeps a slice. RANSAC's regions grow from minimal samples of one surface. The
+            # features aligned with the neighbours compete in the same way (a small torus through
+            # a countersink and its hole would hide the cone and cylinder about the hole's axis);
+            # where the vote found nothing, so do the cluster's own crease normals and RANSAC (the
+            # rows of a cylinder sampled in rows lie at levels across its neighbour's normal, a
+            # few points each: the cylinder through them all explains more). Of all, the split
             # that explains the cluster in larger pieces is taken.
             fragmented = bool(got) and _wants_ransac(got, seen[k], ctx)
             if fragmented:
-                alt = _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0), avail, ctx)
-                if _piece_score(alt) > _piece_score(found):
-                    found = alt
-            # The features aligned with the neighbours compete with fragments in the same way (a
-            # small torus through a countersink and its hole would hide the cone and cylinder
-            # about the hole's axis).
+                found = _larger(found, _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0), avail, ctx))
             if not found or fragmented:
-                alt = aligned_features(cl, families, seg, lctx)
-                if _piece_score(alt) > _piece_score(found):
-                    found = alt
-            # A cluster the vote found nothing in: its crease normals read again from its own
-            # points, and the RANSAC fallback, compete with the aligned features in the same
-            # way (the rows of a cylinder sampled in rows lie on levels across its neighbour's
-            # normal, a few points each: the cylinder through all of them explains more).
+                found = _larger(found, aligned_features(cl, families, seg, lctx))
             if not got:
-                alt = _still_free(own_normals_recognised(seen[k], families, lctx, free0), avail, ctx)
-                if _piece_score(alt) > _piece_score(found):
-                    found = alt
+                found = _larger(found, _still_free(own_normals_recognised(seen[k], families, lctx, free0), avail, ctx))
                 if _wants_ransac(got, seen[k], ctx):
-                    alt = _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0), avail, ctx)
-                    if _piece_score(alt) > _piece_score(found):
-                        found = alt
+                    found = _larger(found, _still_free(_ransac_pieces(pieces, seen[k], families, lctx, free0),
+                                                       avail, ctx))
             accept(found, seg, ctx)
             found_any |= bool(found)
             if found:
@@ -183,6 +174,11 @@ def _piece_score(found: list[Candidate]) -> float:
     """How well candidates explain their points in few pieces: the sum of their squared sizes
     (the same points in larger pieces score more)."""
     return float(sum(len(c.indices) ** 2 for c in found))
+
+
+def _larger(found: list[Candidate], alt: list[Candidate]) -> list[Candidate]:
+    """Whichever of two explanations of a cluster is in larger pieces (``found`` on a tie)."""
+    return alt if _piece_score(alt) > _piece_score(found) else found
 
 
 def own_normals_recognised(cl: np.ndarray, families: list[Family], ctx: Context,
