@@ -40,20 +40,46 @@ def accept(found: list[Candidate], seg: Segmentation, ctx: Context) -> None:
 
 def absorb(seg: Segmentation, ctx: Context) -> None:
     """Give each leftover point to the segment of its nearest assigned
-    neighbour when it lies within ε (noisy clouds: τ) of that segment's primitive."""
-    rest = np.flatnonzero(seg.free)
-    if len(rest) == 0 or not len(seg):
-        return
-    owner = seg.labels
-    assigned = np.flatnonzero(owner >= 0)
+    neighbour when it lies within ε (noisy clouds: τ) of that segment's primitive.
+
+    On noisy clouds (extension, ``policy.absorb_inwards``) the point goes to the
+    segment, among those of its ``absorb_neighbours`` nearest assigned points, whose
+    surface is nearest within τ, and rounds repeat from the points just given: a
+    refit there releases whole bands of a face's scatter, whose inner points have no
+    assigned neighbour and whose rim's nearest one may lie across the edge.
+    """
     P = ctx.pre.points
-    dist, j = cKDTree(P[assigned]).query(P[rest], distance_upper_bound=2 * ctx.link, workers=threads(ctx))
-    ok = np.isfinite(dist)
-    rest, near = rest[ok], owner[assigned[j[ok]]]
-    for k in np.unique(near).tolist():
-        pts = rest[near == k]
+    t = ctx.tol.boundaries
+    band = ctx.tau if ctx.policy.absorb_within_tau else ctx.epsilon
+    inwards = ctx.policy.absorb_inwards
+    for _ in range(t.absorb_rounds if inwards else 1):
+        rest = np.flatnonzero(seg.free)
+        if len(rest) == 0 or not len(seg):
+            return
+        assigned = np.flatnonzero(seg.labels >= 0)
+        k = min(t.absorb_neighbours if inwards else 1, len(assigned))
+        dist, j = cKDTree(P[assigned]).query(P[rest], k=k, distance_upper_bound=2 * ctx.link, workers=threads(ctx))
+        ok = np.isfinite(dist.reshape(len(rest), k))
+        row = np.nonzero(ok)[0]
+        pairs = np.unique(np.c_[row, seg.labels[assigned[j.reshape(len(rest), k)[ok]]]], axis=0)
+        to = _nearest_surface(seg, P[rest], pairs, band)
+        if not (to >= 0).any():
+            return
+        for s in np.unique(to[to >= 0]).tolist():
+            seg.assign(rest[to == s], s)
+
+
+def _nearest_surface(seg: Segmentation, X: np.ndarray, pairs: np.ndarray, band: float) -> np.ndarray:
+    """For points X (m, 3) and candidate (point row, segment) ``pairs`` (p, 2): each point's
+    segment whose surface is nearest within ``band`` (m,), -1 for none."""
+    best = np.full(len(X), np.inf)
+    to = np.full(len(X), -1)
+    for s in np.unique(pairs[:, 1]).tolist():
+        r = pairs[pairs[:, 1] == s, 0]
         # On a noisy cloud ε is 6 σ: a band that wide beyond a surface is
         # another surface's (its own points lie within τ = 3 σ).
-        pts = pts[surface_distance(seg.records[k], P[pts])[0] < (ctx.tau if ctx.policy.absorb_within_tau
-                                                                  else ctx.epsilon)]
-        seg.assign(pts, k)
+        d = surface_distance(seg.records[s], X[r])[0]
+        take = (d < band) & (d < best[r])
+        best[r[take]] = d[take]
+        to[r[take]] = s
+    return to

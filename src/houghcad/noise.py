@@ -88,6 +88,12 @@ class NoisePolicy:
         ``scale.min_points_floor``: a handful of noisy points fits some
         primitive of its own within the noise (a noisy groove's walls came
         out as scraps of 6-16 points with the clean floor).
+    absorb_inwards : bool
+        Leftover points are absorbed in rounds from a freed region's rim
+        inwards, each by the segment among its nearest assigned points' whose
+        surface is nearest (:func:`houghcad.growth.absorb`). On exact samples
+        the leftovers are boundary rows and small faces the splitting phase
+        must see (Fit4CAD: -0.0004 mean DSC, folds 0-2 down, with it on).
     """
 
     name: str
@@ -105,14 +111,15 @@ class NoisePolicy:
     torus_grid_from_points: bool
     one_aligned_cylinder: bool
     larger_segments: bool
+    absorb_inwards: bool
 
     @property
     def noisy(self) -> bool:
         return self.name == "noisy"
 
 
-CLEAN = NoisePolicy("clean", *([False] * 14))
-NOISY = NoisePolicy("noisy", *([True] * 14))
+CLEAN = NoisePolicy("clean", *([False] * 15))
+NOISY = NoisePolicy("noisy", *([True] * 15))
 
 
 def choose(noise: str, sigma: float, spacing: float) -> NoisePolicy:
