@@ -210,6 +210,10 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--no-write", action="store_true")
     a = ap.parse_args(argv)
+    if a.instances == 0 and not a.no_write:
+        # The single-family table would be written with no row, over the measured one.
+        print("complex.py: --instances 0 runs the composite parts only; add --no-write", file=sys.stderr)
+        return 2
     from houghcad import synth
 
     fams = complex_families() if a.families is None else [f.strip() for f in a.families.split(",") if f.strip()]
