@@ -169,9 +169,11 @@ def test_where_the_vote_finds_nothing_the_fallback_in_larger_pieces_is_taken(mon
     ctx = context(cloud.points)
     k = [p["name"] for p in cloud.primitives].index("hole 0")
     hole = np.flatnonzero(cloud.labels == k)
-    P, N = ctx.pre.points, ctx.pre.normals
+    P, N, T = ctx.pre.points, ctx.pre.normals, ctx.pre.transform
     cyl = REGISTRY["cylinder"]
-    prim = cyl.fit(Primitive("cylinder", dict(cloud.primitives[k]["params"])), P[hole], N[hole])
+    g = cloud.primitives[k]["params"]  # world units; the context's points are in standard units
+    prim = Primitive("cylinder", {"axis_point": T.points(np.asarray(g["axis_point"])[None])[0],
+                                  "axis": T.dirs(np.asarray(g["axis"])[None])[0], "radius": g["radius"] * T.scale})
     d = cyl.distance(prim, P[hole])
     whole = Candidate(cyl, prim, hole, mean_fitting_error(d, P[hole]), d)
     rest = np.setdiff1d(np.arange(len(P)), hole)

@@ -13,10 +13,9 @@ from scipy.sparse.csgraph import connected_components
 from .adjacency import smooth_adjacency
 from .context import Context
 from .families import Family
-from .families.base import Primitive
 from .growth import accept
 from .recognize import candidates, inliers, recognize
-from .state import Candidate, SegmentRecord, SegmentView, Segmentation, mean_fitting_error
+from .state import Candidate, SegmentView, Segmentation, mean_fitting_error
 
 
 def consolidate(seg: Segmentation, families: list[Family], ctx: Context) -> None:

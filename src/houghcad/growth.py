@@ -50,6 +50,8 @@ def absorb(seg: Segmentation, ctx: Context) -> None:
     """
     P = ctx.pre.points
     t = ctx.tol.boundaries
+    # On a noisy cloud ε is 6 σ: a band that wide beyond a surface is
+    # another surface's (its own points lie within τ = 3 σ).
     band = ctx.tau if ctx.policy.absorb_within_tau else ctx.epsilon
     inwards = ctx.policy.absorb_inwards
     for _ in range(t.absorb_rounds if inwards else 1):
@@ -59,9 +61,9 @@ def absorb(seg: Segmentation, ctx: Context) -> None:
         assigned = np.flatnonzero(seg.labels >= 0)
         k = min(t.absorb_neighbours if inwards else 1, len(assigned))
         dist, j = cKDTree(P[assigned]).query(P[rest], k=k, distance_upper_bound=2 * ctx.link, workers=threads(ctx))
-        ok = np.isfinite(dist.reshape(len(rest), k))
-        row = np.nonzero(ok)[0]
-        pairs = np.unique(np.c_[row, seg.labels[assigned[j.reshape(len(rest), k)[ok]]]], axis=0)
+        dist, j = dist.reshape(len(rest), k), j.reshape(len(rest), k)  # k = 1 gives flat arrays
+        ok = np.isfinite(dist)
+        pairs = np.unique(np.c_[np.nonzero(ok)[0], seg.labels[assigned[j[ok]]]], axis=0)
         to = _nearest_surface(seg, P[rest], pairs, band)
         if not (to >= 0).any():
             return
@@ -76,8 +78,6 @@ def _nearest_surface(seg: Segmentation, X: np.ndarray, pairs: np.ndarray, band: 
     to = np.full(len(X), -1)
     for s in np.unique(pairs[:, 1]).tolist():
         r = pairs[pairs[:, 1] == s, 0]
-        # On a noisy cloud ε is 6 σ: a band that wide beyond a surface is
-        # another surface's (its own points lie within τ = 3 σ).
         d = surface_distance(seg.records[s], X[r])[0]
         take = (d < band) & (d < best[r])
         best[r[take]] = d[take]

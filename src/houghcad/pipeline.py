@@ -26,6 +26,7 @@ from .consolidation import consolidate, revisit_poor_fits
 from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
 from .errors import InputError
 from .parallel import Workers, resolve_jobs
+from .planes import prefer_planes
 from .growth import absorb, accept
 from .multires import Subsample, propagate, voxel_subsample
 from .output import build_segments
@@ -34,7 +35,6 @@ from .preprocess import preprocess
 from .recognize import recognize, refine
 from .result import Result
 from .splitting import splitting_phase
-from .planes import prefer_planes
 from .passes import EXTENSION, PAPER_5_2, PAPER_5_3, PAPER_5_4, Pass, Run, Runner, TraceFn, monotonic
 from .state import SegmentRecord, Segmentation, checks_enabled
 from .tolerances import Tolerances
