@@ -54,8 +54,8 @@ from ..families.sphere import sample_sphere
 from ..families.torus import sample_torus
 from ._poses import PARAM_KINDS, SAMPLERS, apply_transform, param_kinds, random_pose, random_rotation, transform_params
 from .complex import ellipsoid_part, generalized_cone_part, screw_part
-from .parts import (PARTS, block_with_hole_and_slot, filleted_block, gear_like, mirrored_cones, plate_with_holes,
-                    rounded_tube, shaft_with_groove, write_demo, write_fit4cad_segments)
+from .parts import (PARTS, block_with_hole_and_slot, filleted_block, filleted_disc, gear_like, mirrored_cones,
+                    plate_with_holes, rounded_tube, shaft_with_groove, write_demo, write_fit4cad_segments)
 from .primitives import FAMILIES, SynthCloud, _Streams, sample_family, sample_parametric, single  # noqa: F401
 from .paper import PAPER_PARTS, table5_block
 from .perturb import Perturbation, perturb
@@ -85,6 +85,7 @@ __all__ = [
     "random_pose",
     "random_rotation",
     "rounded_tube",
+    "filleted_disc",
     "sample_annulus",
     "sample_cone",
     "sample_cylinder",

@@ -367,6 +367,50 @@ def rounded_tube(
     return _part(st, f"rounded_tube-{seed}", faces, solid, n_points, noise, outliers, pose, scale)
 
 
+def filleted_disc(
+    seed: int = 0,
+    n_points: int = 5000,
+    noise: float = 0.0,
+    pose: bool = True,
+    *,
+    outliers: float = 0.0,
+    scale: float | None = None,
+) -> SynthCloud:
+    """Flat disc with a central hole whose rim is rounded on both edges, a narrow band between.
+
+    Part frame: Ri < ρ < Ro, 0 ≤ z ≤ H. The rim's top and bottom edges are rounded by quarter
+    tori of one minor radius, which take most of the thickness: the cylinder band left between
+    them is a fifth of it. The two tubes share the axis and both radii, and their centres lie at
+    different heights: the normal lines of the whole rim meet between them.
+
+    Primitives (6): 0 top annulus, 1 bottom annulus, 2 rim cylinder (the band), 3 hole cylinder,
+    4 upper fillet torus (outer-upper quarter of its tube), 5 lower fillet torus (outer-lower).
+    """
+    st = _Streams.from_seed(seed, "filleted_disc")
+    g = st.shape
+    Ro, Ri, H = g.uniform(18.0, 20.0), g.uniform(4.0, 6.0), g.uniform(3.5, 4.5)
+    rf = H * g.uniform(0.38, 0.42)
+    Rc, z_lo, z_hi = Ro - rf, rf, H - rf  # the tubes' centre circles
+
+    def solid(p: Array) -> Array:
+        rho, z = _radial(p), p[:, 2]
+        upper = (z > z_hi) & (rho > Rc) & (np.hypot(rho - Rc, z - z_hi) > rf)
+        lower = (z < z_lo) & (rho > Rc) & (np.hypot(rho - Rc, z - z_lo) > rf)
+        return (rho > Ri) & (rho < Ro) & (z > 0) & (z < H) & ~upper & ~lower
+
+    faces = [
+        _disc_face("top", (0, 0, H), Ro),
+        _disc_face("bottom", (0, 0, 0), Ro, (0, 0, -1)),
+        _cyl_face("rim", (0, 0, H / 2), Ro, H),
+        _cyl_face("hole", (0, 0, H / 2), Ri, H),
+        _Face("upper fillet", "torus", {"major": float(Rc), "minor": float(rf), "v_range": (0.0, np.pi / 2)},
+              np.eye(3), np.array([0.0, 0.0, z_hi])),
+        _Face("lower fillet", "torus", {"major": float(Rc), "minor": float(rf), "v_range": (1.5 * np.pi, 2 * np.pi)},
+              np.eye(3), np.array([0.0, 0.0, z_lo])),
+    ]
+    return _part(st, f"filleted_disc-{seed}", faces, solid, n_points, noise, outliers, pose, scale)
+
+
 #: Part name → generator function (each takes ``seed=`` and returns a :class:`SynthCloud`).
 PARTS: dict[str, Callable[..., SynthCloud]] = {
     "block_with_hole_and_slot": block_with_hole_and_slot,
@@ -376,6 +420,7 @@ PARTS: dict[str, Callable[..., SynthCloud]] = {
     "gear_like": gear_like,
     "filleted_block": filleted_block,
     "rounded_tube": rounded_tube,
+    "filleted_disc": filleted_disc,
     **COMPLEX_PARTS,
     **SMALL_FACE_PARTS,
     **PAPER_PARTS,
