@@ -76,8 +76,12 @@ def _nearest_surface(seg: Segmentation, X: np.ndarray, pairs: np.ndarray, band: 
     segment whose surface is nearest within ``band`` (m,), -1 for none."""
     best = np.full(len(X), np.inf)
     to = np.full(len(X), -1)
-    for s in np.unique(pairs[:, 1]).tolist():
-        r = pairs[pairs[:, 1] == s, 0]
+    # Pairs grouped by segment with one sort, not one scan of every pair per segment (as
+    # houghcad.multires.propagate does).
+    by_seg = np.argsort(pairs[:, 1], kind="stable")
+    present, starts = np.unique(pairs[by_seg, 1], return_index=True)
+    for s, sel in zip(present.tolist(), np.split(by_seg, starts[1:])):
+        r = pairs[sel, 0]
         d = surface_distance(seg.records[s], X[r])[0]
         take = (d < band) & (d < best[r])
         best[r[take]] = d[take]
