@@ -15,11 +15,13 @@ import pytest
 
 from houghcad import families, parallel, synth
 from houghcad.context import derive_context
-from houghcad.noise import CLEAN
+from houghcad.noise import CLEAN, NOISY
 from houghcad.parallel import Workers, available_cores, can_fork, resolve_jobs
 from houghcad.preprocess import preprocess
+from houghcad.consolidation import revisit_poor_fits
 from houghcad.recognize import candidates, recognize
-from houghcad.splitting import recognise_cluster
+from houghcad.splitting import ransac_recognised, recognise_cluster
+from houghcad.state import Segmentation
 from houghcad.tolerances import Tolerances
 
 needs_fork = pytest.mark.skipif(not can_fork(), reason="no fork start method here")
@@ -63,6 +65,66 @@ def test_workers_compute_what_this_process_computes(run):
         assert (c[1] is None) == (want[1] is None)
     _same(spread, candidates(halves[0], fams, lctx, avail))
     assert w.pool is None  # closed
+
+
+def _records(seg: Segmentation, items: list[int], ctx, fams, extra: int) -> list:
+    """What a task over a segmentation reads back: each item's segment, its size and record."""
+    return [(k, len(seg.indices(k)), seg.records[k], [f.name for f in fams], extra) for k in items]
+
+
+@needs_fork
+def test_tasks_over_a_segmentation_and_submitted_tasks(run):
+    ctx, fams = run
+    n = len(ctx.pre.points)
+    avail = np.ones(n, bool)
+    seg = Segmentation.of(n, recognize(np.arange(n), fams, ctx, avail))
+    items = list(range(len(seg)))[::-1]
+    assert len(items) >= 4
+    with Workers(ctx, fams, 2) as w:
+        got = w.map_segments(_records, seg, items, ctx, fams[:2], 7)
+        assert w.map_segments(_records, seg, items[:3], ctx, fams, 7) is None  # fewer than 2 per worker
+        assert w.map_segments(_records, seg, items, ctx, [copy.copy(fams[0])], 7) is None  # foreign family
+        wait = w.submit("recognize", [(np.arange(n // 2), fams, None)], ctx)  # even one job
+        assert wait is not None
+        later = wait()
+    want = _records(seg, items, ctx, fams[:2], 7)
+    assert [(k, m, f, e) for k, m, _, f, e in got] == [(k, m, f, e) for k, m, _, f, e in want]  # in item order
+    for (*_, a, _f, _e), (*_, b, _g, _h) in zip(got, want):
+        assert a.family is b.family and repr(a.prim) == repr(b.prim)  # families come back as the run's
+    _same(later[0], recognize(np.arange(n // 2), fams, ctx, avail))
+
+
+@needs_fork
+def test_ransac_regions_and_poor_fits_on_workers(run, monkeypatch):
+    """The splitting phase's RANSAC regions and consolidation's votes on poorly fitted segments
+    give on the workers what they give here."""
+    ctx, fams = run
+    n = len(ctx.pre.points)
+    avail = np.ones(n, bool)
+    want = ransac_recognised(np.arange(n), fams, ctx, avail)
+    # Planes alone on a noisy part: poor fits across its cones for consolidation to revisit.
+    pre = preprocess(synth.mirrored_cones(seed=3, n_points=4000, noise=0.002).points)
+    m = len(pre.points)
+    nctx = derive_context(pre, m, Tolerances(), NOISY)
+    seg = Segmentation.of(m, recognize(np.arange(m), fams[:1], nctx, np.ones(m, bool)))
+    here, there = seg.copy(), seg.copy()
+    assert revisit_poor_fits(here, fams, nctx)
+    handed_out = []
+    run_jobs = Workers.run
+
+    def spy(self, what, jobs, c):
+        got = run_jobs(self, what, jobs, c)
+        handed_out.append((what, got is not None))
+        return got
+
+    monkeypatch.setattr(Workers, "run", spy)
+    with Workers(ctx, fams, 2) as w:
+        _same(ransac_recognised(np.arange(n), fams, replace(ctx, workers=w), avail), want)
+    with Workers(nctx, fams, 2) as w:
+        assert revisit_poor_fits(there, fams, replace(nctx, workers=w))
+    assert ("recognize", True) in handed_out and ("candidates", True) in handed_out
+    np.testing.assert_array_equal(here.labels, there.labels)
+    assert [repr(r) for r in here.records] == [repr(r) for r in there.records]
 
 
 @needs_fork

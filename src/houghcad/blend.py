@@ -131,9 +131,19 @@ def _fillet_pass(seg: Segmentation, families: list[Family], ctx: Context) -> int
     if len(seg) < 2 or not ({"cylinder", "torus"} & set(by_name)):
         return 0
     pairs, nbrs = _corner_pairs(seg, ctx)
+    # Each pair's proposal reads the state only: the pairs go to the run's workers when it has some.
+    got = ctx.workers.map_segments(_proposals, seg, pairs, ctx, families, nbrs) if ctx.workers else None
+    if got is None:
+        got = _proposals(seg, pairs, ctx, families, nbrs)
+    return _apply(seg, [p for p in got if p is not None], ctx)
+
+
+def _proposals(seg: Segmentation, pairs: list[tuple[int, int]], ctx: Context, families: list[Family],
+               nbrs: dict[int, set[int]]) -> list[_Proposal | None]:
+    """:func:`_propose` of each pair (i, j) of segments, in order."""
+    by_name = {f.name: f for f in families}
     near = _Near(seg, ctx.pre.points, ctx.tol.fillets.reach_diagonals * ctx.pre.diagonal, threads(ctx))
-    found = [p for i, j in pairs if (p := _propose(seg, i, j, nbrs, by_name, near, ctx)) is not None]
-    return _apply(seg, found, ctx)
+    return [_propose(seg, i, j, nbrs, by_name, near, ctx) for i, j in pairs]
 
 
 def _corner_pairs(seg: Segmentation, ctx: Context) -> tuple[list[tuple[int, int]], dict[int, set[int]]]:

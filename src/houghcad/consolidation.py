@@ -82,23 +82,20 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context) -
     def cost(c: Candidate, idx: np.ndarray) -> float:
         return float(np.minimum(c.family.distance(c.prim, P[idx]), ctx.tau).mean()) - ref
 
+    # A replacement changes only its own segment's points: every poor
+    # segment's vote is known before the first is replaced (on the run's
+    # workers, side by side, when there are some).
+    todo = [k for k in sorted(range(len(seg)), key=lambda i: -len(seg.indices(i))) if _poor(seg[k], ref, ctx)]
+    voted = ctx.workers.run("candidates", [(seg.indices(k), families, None) for k in todo], lctx) \
+        if ctx.workers else None
     replaced = False
-
-    for k in sorted(range(len(seg)), key=lambda i: -len(seg.indices(i))):
+    for n, k in enumerate(todo):
         s = seg[k]
-        if len(s.indices) < t.revisit_min_size * ctx.min_points:
-            continue
-        d = s.family.distance(s.prim, P[s.indices])
-        if float(np.minimum(d, ctx.tau).mean()) - ref <= (t.excess - 1.0) * ref:  # its cost
-            continue
-        if np.median(d) <= t.exact_taus * ctx.tau:
-            # Most of the segment lies exactly on its primitive: the excess
-            # is rows of its neighbours, not a wrong surface.
-            continue
-        avail = np.zeros(len(P), bool)
-        avail[s.indices] = True
+        if voted is None:
+            avail = np.zeros(len(P), bool)
+            avail[s.indices] = True
         cover = []
-        for c in candidates(s.indices, families, lctx, avail):
+        for c in voted[n] if voted is not None else candidates(s.indices, families, lctx, avail):
             if len(c.indices) < t.dominant * len(s.indices):
                 continue
             # The candidate's share of the segment, compared there.
@@ -124,6 +121,20 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context) -
         seg.set_record(k, new.record)
         replaced = True
     return replaced
+
+
+def _poor(s: SegmentView, ref: float, ctx: Context) -> bool:
+    """Whether :func:`revisit_poor_fits` votes again on segment ``s``: large enough, its cost
+    above ``excess`` times the noise's own ``ref``, and not exact on most of its points."""
+    t = ctx.tol.consolidation
+    if len(s.indices) < t.revisit_min_size * ctx.min_points:
+        return False
+    d = s.family.distance(s.prim, ctx.pre.points[s.indices])
+    if float(np.minimum(d, ctx.tau).mean()) - ref <= (t.excess - 1.0) * ref:  # its cost
+        return False
+    # Most of the segment on its primitive exactly: the excess is rows of
+    # its neighbours, not a wrong surface.
+    return bool(np.median(d) > t.exact_taus * ctx.tau)
 
 
 @dataclass(frozen=True)
@@ -156,6 +167,7 @@ def _revote_groups(seg: Segmentation, cplx: list[Family], per_cluster: list[Fami
     for vote in _groupings(seg, cplx, per_cluster, ctx):
         g = coo_matrix((np.ones(len(vote.edges)), (vote.edges[:, 0], vote.edges[:, 1])), shape=(n, n))
         ncomp, lab = connected_components(g, directed=False)
+        groups = []
         for comp in range(ncomp):
             members = np.flatnonzero((lab == comp) & ~removed)
             key = (id(vote.families), vote.peel, *members.tolist())
@@ -165,7 +177,12 @@ def _revote_groups(seg: Segmentation, cplx: list[Family], per_cluster: list[Fami
             if vote.peel:
                 # Segments of these families are whole surfaces already.
                 members = np.array([m for m in members if seg[m].family not in vote.families], dtype=np.int64)
-            added += _vote_group(seg, members, vote, removed, ctx)
+            groups.append(members)
+        # The groups are disjoint and a group's vote marks its own members
+        # only: their first votes are known before the first is taken (on the
+        # run's workers, side by side, when there are some).
+        for members, first in zip(groups, _first_votes(seg, groups, vote)):
+            added += _vote_group(seg, members, vote, removed, ctx, first)
     if added:
         seg.remove(np.flatnonzero(removed))
         accept(added, seg, ctx)
@@ -206,9 +223,10 @@ def _between(keep: np.ndarray, edges: np.ndarray) -> np.ndarray:
 
 
 def _vote_group(seg: Segmentation, members: np.ndarray, vote: _Vote, removed: np.ndarray,
-                ctx: Context) -> list[Candidate]:
+                ctx: Context, first: list[Candidate] | None = None) -> list[Candidate]:
     """The candidates that replace two or more of the group's ``members``
-    (segment ids); their ids are marked in ``removed`` (bool (m,)).
+    (segment ids); their ids are marked in ``removed`` (bool (m,)). ``first``:
+    the group's first recognition when already known (:func:`_first_votes`).
 
     A carved surface is cut into comparable pieces; a face that dominates its
     group (the plane a torus meets) is not one of them. Where the vote takes
@@ -222,16 +240,15 @@ def _vote_group(seg: Segmentation, members: np.ndarray, vote: _Vote, removed: np
     added: list[Candidate] = []
     retries = t.peel_retries
     while True:
-        while vote.peel and len(members) >= 2 and sizes.max() > t.peel_share * sizes.sum():
-            keep = np.arange(len(members)) != np.argmax(sizes)
-            members, sizes = members[keep], sizes[keep]
-        if len(members) < 2 or sizes.max() > t.peel_share * sizes.sum():
+        members, sizes, region = _region(seg, members, sizes, vote)
+        if region is None:
             break
-        region = np.concatenate([seg[m].indices for m in members])
-        avail = np.zeros(len(P), bool)
-        avail[region] = True
+        if first is None:
+            avail = np.zeros(len(P), bool)
+            avail[region] = True
+            first = recognize(region, vote.families, vote.ctx, avail)
         took = False
-        for c in recognize(np.sort(region), vote.families, vote.ctx, avail):
+        for c in first:
             got = _covered(c, [seg[m] for m in members], ctx)
             got = [(members[j], q, d) for j, q, d in got if not removed[members[j]]]
             if vote.peel:
@@ -248,8 +265,35 @@ def _vote_group(seg: Segmentation, members: np.ndarray, vote: _Vote, removed: np
             break
         retries -= 1
         keep = np.arange(len(members)) != np.argmax(sizes)
-        members, sizes = members[keep], sizes[keep]
+        members, sizes, first = members[keep], sizes[keep], None
     return added
+
+
+def _region(seg: Segmentation, members: np.ndarray, sizes: np.ndarray, vote: _Vote) \
+        -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The members (ids) and sizes of a group that :func:`_vote_group` votes on, after the
+    dominant faces are set aside, and their points (sorted global indices), or None when too
+    few are left or one still dominates."""
+    share = vote.ctx.tol.consolidation.peel_share
+    while vote.peel and len(members) >= 2 and sizes.max() > share * sizes.sum():
+        keep = np.arange(len(members)) != np.argmax(sizes)
+        members, sizes = members[keep], sizes[keep]
+    if len(members) < 2 or sizes.max() > share * sizes.sum():
+        return members, sizes, None
+    return members, sizes, np.sort(np.concatenate([seg[m].indices for m in members]))
+
+
+def _first_votes(seg: Segmentation, groups: list[np.ndarray], vote: _Vote) -> list[list[Candidate] | None]:
+    """The first recognition of each group (members' ids) by :func:`_vote_group`, computed on the
+    run's workers; None for those left to it (all of them without workers)."""
+    out: list[list[Candidate] | None] = [None] * len(groups)
+    regions = [_region(seg, m, np.array([len(seg[k].indices) for k in m]), vote)[2] for m in groups]
+    todo = [i for i, r in enumerate(regions) if r is not None]
+    workers = vote.ctx.workers
+    got = workers.run("recognize", [(regions[i], vote.families, None) for i in todo], vote.ctx) if workers else None
+    for i, found in zip(todo, got or []):
+        out[i] = found
+    return out
 
 
 def _touching(got: list, edges: np.ndarray) -> list:

@@ -21,7 +21,7 @@ import multiprocessing as mp
 import multiprocessing.pool
 import os
 import signal
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
@@ -29,7 +29,7 @@ import numpy as np
 if TYPE_CHECKING:  # the pipeline's modules import this one
     from .context import Context
     from .families import Family
-    from .state import Candidate
+    from .state import Candidate, Segmentation
 
 #: A batch of tasks under this many points in all runs here: handing it out costs more.
 PARALLEL_MIN_POINTS = 100
@@ -65,9 +65,9 @@ def can_fork() -> bool:
 def _task(job: tuple[str, np.ndarray, list[str], dict[str, Any], Any]) -> Any:
     """In a worker: ``what`` of the families ``names`` on the points ``idx``, every one of them
     free: a family's "propose"d primitives, the "evaluate"d candidates of its primitives
-    ``extra`` (``[(primitive, coarse tolerance)]``), the "recognize"d ones, or a splitting-phase
-    "cluster"'s."""
-    from .recognize import evaluate, propose, recognize, voting_context
+    ``extra`` (``[(primitive, coarse tolerance)]``), every family's "candidates", the
+    "recognize"d ones, or a splitting-phase "cluster"'s."""
+    from .recognize import candidates, evaluate, propose, recognize, voting_context
     from .splitting import recognise_cluster
 
     what, idx, names, overrides, extra = job
@@ -81,8 +81,8 @@ def _task(job: tuple[str, np.ndarray, list[str], dict[str, Any], Any]) -> Any:
             return propose(fams[0], idx, vctx)
         return _swap_families([evaluate(fams[0], prim, idx, vctx, coarse) for prim, coarse in extra], _FamilyName)
     avail = np.ones(len(ctx.pre.points), bool)
-    return _swap_families((recognize if what == "recognize" else recognise_cluster)(idx, fams, ctx, avail),
-                          _FamilyName)
+    step = {"candidates": candidates, "recognize": recognize, "cluster": recognise_cluster}[what]
+    return _swap_families(step(idx, fams, ctx, avail), _FamilyName)
 
 
 @dataclass(frozen=True)
@@ -94,13 +94,29 @@ class _FamilyName:
 
 
 def _swap_families(x: Any, family_of: "Callable[[str], Any]") -> Any:
-    """``x`` (candidates, in lists and tuples; anything else as it is) with each candidate's
-    family replaced by ``family_of(its name)``."""
-    from .state import Candidate
-
+    """``x`` (dataclasses whose ``family`` is a family, such as candidates and segment records,
+    in lists and tuples; anything else as it is) with each one's family replaced by
+    ``family_of(its name)``. A primitive's ``family`` is a name already."""
     if isinstance(x, (list, tuple)):
         return type(x)(_swap_families(v, family_of) for v in x)
-    return replace(x, family=family_of(x.family.name)) if isinstance(x, Candidate) else x
+    if is_dataclass(x) and not isinstance(x, type) and hasattr(getattr(x, "family", None), "name"):
+        return replace(x, family=family_of(x.family.name))
+    return x
+
+
+def _segmentation_task(job: tuple[Callable, np.ndarray, list, dict[str, Any], list[str], list, tuple]) -> list:
+    """In a worker: ``func(seg, items, ctx, families, *args)`` on the segmentation whose labels
+    and records (families named) came with the task."""
+    from .state import Segmentation
+
+    func, labels, records, overrides, names, items, args = job
+    assert _BASE is not None
+    base, by_name = _BASE
+    seg = Segmentation(0)
+    seg.labels = labels
+    seg.records = _swap_families(records, by_name.__getitem__)
+    fams = [by_name[n] for n in names]
+    return _swap_families(func(seg, items, replace(base, **overrides), fams, *args), _FamilyName)
 
 
 class Workers:
@@ -148,10 +164,10 @@ class Workers:
         return out
 
     def _payload(self, what: str, jobs: "list[tuple[np.ndarray, list[Family], Any]]",
-                 ctx: "Context") -> list[tuple] | None:
-        """The tasks of ``jobs`` for :func:`_task`, or None when they are not worth handing out or
-        cannot be rebuilt in the workers."""
-        if self.pool is None or len(jobs) < 2 or sum(len(j[0]) for j in jobs) < PARALLEL_MIN_POINTS:
+                 ctx: "Context", min_jobs: int = 2) -> list[tuple] | None:
+        """The tasks of ``jobs`` for :func:`_task`, or None when they are not worth handing out
+        (fewer than ``min_jobs``, or few points) or cannot be rebuilt in the workers."""
+        if self.pool is None or len(jobs) < min_jobs or sum(len(j[0]) for j in jobs) < PARALLEL_MIN_POINTS:
             return None
         if any(self.by_name.get(f.name) is not f for j in jobs for f in j[1]):
             return None
@@ -172,6 +188,51 @@ class Workers:
             return _swap_families(self.pool.map(_task, payload, chunksize=1), self.by_name.__getitem__)
         except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
             return None
+
+    def submit(self, what: str, jobs: "list[tuple[np.ndarray, list[Family], Any]]", ctx: "Context") \
+            -> "Callable[[], list[Any] | None] | None":
+        """As :meth:`run`, without waiting (even one job is handed out: the caller works beside
+        it): a function that waits for the results and returns them in job order, or None when
+        they do not pickle. None as :meth:`run`."""
+        payload = self._payload(what, jobs, ctx, min_jobs=1)
+        if payload is None:
+            return None
+        assert self.pool is not None
+        pending = self.pool.map_async(_task, payload, chunksize=1)
+
+        def wait() -> list[Any] | None:
+            try:
+                return _swap_families(pending.get(), self.by_name.__getitem__)
+            except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
+                return None
+
+        return wait
+
+    def map_segments(self, func: Callable, seg: "Segmentation", items: list, ctx: "Context",
+                     fams: "list[Family]", *args: Any) -> list | None:
+        """``func(seg, items, ctx, fams, *args)``, a list with one result per item, on the
+        workers: the items dealt out in turn over one task per worker, the results back in item
+        order. ``func`` must be a module-level function (it goes to the workers by name) and only
+        read ``seg``. None as :meth:`run`, or when a family is not one of the run's."""
+        if self.pool is None or len(items) < 2 * self.n_jobs:
+            return None
+        overrides = self._overrides(ctx)
+        if overrides is None or any(self.by_name.get(f.name) is not f
+                                    for f in [*fams, *(r.family for r in seg.records)]):
+            return None
+        records = _swap_families(list(seg.records), _FamilyName)
+        names = [f.name for f in fams]
+        n = self.n_jobs
+        payload = [(func, seg.labels, records, overrides, names, items[j::n], args) for j in range(n)]
+        try:
+            parts = _swap_families(self.pool.map(_segmentation_task, payload, chunksize=1),
+                                   self.by_name.__getitem__)
+        except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
+            return None
+        out: list = [None] * len(items)
+        for j, part in enumerate(parts):
+            out[j::n] = part
+        return out
 
     def candidates(self, idx: np.ndarray, fams: "list[Family]", ctx: "Context") -> "list[Candidate] | None":
         """``recognize.candidates`` of the families on the points ``idx`` (all free), on the

@@ -76,7 +76,7 @@ def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
             # Without workers each cluster is recognised when its turn comes
             # (one swallowed by the segments before it costs nothing), on its
             # points at the round's start all the same.
-            got, pieces = ahead[k] if ahead is not None else (recognize(seen[k], families, lctx, free0), None)
+            got, pieces = ahead(k) or (recognize(seen[k], families, lctx, free0), None)
             found = _still_free(got, avail, ctx)
             # Extension: a cluster recognised only in fragments goes to the RANSAC fallback as
             # well. The placements come from the cluster's normals, and where several surfaces
@@ -134,15 +134,14 @@ def _still_free(found: list[Candidate], avail: np.ndarray, ctx: Context) -> list
 def ransac_recognised(cl: np.ndarray, families: list[Family], ctx: Context,
                       avail: np.ndarray) -> list[Candidate]:
     """What the Hough recognition finds in each region CGAL's RANSAC proposes on
-    the cluster ``cl``; each piece's segments are hidden from the next pieces."""
-    avail = avail.copy()
-    found: list[Candidate] = []
-    for piece in ransac_pieces(cl, ctx):
-        got = recognize(piece, families, ctx, avail)
-        for c in got:
-            avail[c.indices] = False
-        found += got
-    return found
+    the cluster ``cl``, in order. The regions are disjoint and a region's
+    candidates hold its points only, so each region is recognised on its own
+    (on the run's workers when there are some)."""
+    pieces = [p[avail[p]] for p in ransac_pieces(cl, ctx)]
+    got = ctx.workers.run("recognize", [(p, families, None) for p in pieces], ctx) if ctx.workers else None
+    if got is None:
+        got = [recognize(p, families, ctx, avail) for p in pieces]
+    return [c for found in got for c in found]
 
 
 def recognise_cluster(cl: np.ndarray, families: list[Family], ctx: Context,
@@ -215,21 +214,33 @@ def cluster_context(cl: np.ndarray, ctx: Context) -> Context:
 
 
 def _recognised_ahead(seen: list[np.ndarray], families: list[Family], ctx: Context, free: np.ndarray) \
-        -> list[tuple[list[Candidate], list[Candidate] | None]] | None:
-    """What :func:`recognise_cluster` gives on each cluster's points ``seen``
-    (free in ``free``, bool (n,)), computed on the run's workers; None when
-    there are none or it is not worth it."""
-    todo = [s for s in seen if len(s) >= ctx.min_points]
+        -> Callable[[int], tuple[list[Candidate], list[Candidate] | None] | None]:
+    """What :func:`recognise_cluster` gives on cluster k's points ``seen[k]`` (free in ``free``,
+    bool (n,)), computed on the run's workers, as a function of k that waits for it; None for
+    the clusters left to the caller (all of them when there are no workers)."""
+    todo = [k for k, s in enumerate(seen) if len(s) >= ctx.min_points]
+    if not ctx.workers or not todo:
+        return lambda k: None
     # Clusters come largest first: the costliest are handed out first. When
     # one cluster holds most of the points, it would keep one worker busy
-    # while the others idle: the clusters are recognised in turn instead,
-    # each with its families and peaks spread over the workers.
-    spread = len(todo) >= 2 and len(todo[0]) <= CLUSTER_SHARE * sum(map(len, todo))
-    got = ctx.workers.run("cluster", [(s, families, None) for s in todo], ctx) if ctx.workers and spread else None
-    if got is None:
-        return None
-    it = iter(got)
-    return [next(it) if len(s) >= ctx.min_points else ([], None) for s in seen]
+    # while the others idle: it is left to the caller, who recognises it with
+    # its families and peaks spread over the workers, and the workers take the
+    # other clusters between those tasks.
+    if len(seen[todo[0]]) > CLUSTER_SHARE * sum(len(seen[k]) for k in todo):
+        todo = todo[1:]
+    wait = ctx.workers.submit("cluster", [(seen[k], families, None) for k in todo], ctx)
+    if wait is None:
+        return lambda k: None
+    got: dict[int, tuple | None] = {}
+
+    def result(k: int) -> tuple[list[Candidate], list[Candidate] | None] | None:
+        if not got:
+            done = wait()
+            got.update(zip(todo, done) if done is not None else {})
+            got[-1] = None  # waited
+        return got.get(k)
+
+    return result
 
 
 def on_one_line(P: np.ndarray) -> bool:
