@@ -4,9 +4,10 @@ embarrassingly parallel).
 A run forks its :class:`Workers` once, right after preprocessing. Each worker holds the run's
 context as it was at the fork (the preprocessed cloud, its scales and thresholds), copy-on-write,
 so a task is only a list of point indices and the families' names, and only the candidates come
-back. Why processes, and why written here rather than taken from a library: the work is mostly
-Python-level (scipy's small least-squares fits, numpy on a few thousand points), so threads
-serialise on the GIL; ``concurrent.futures`` and ``joblib`` would pickle the whole cloud into
+back (a task over a segmentation state, :meth:`Workers.map_segments`, also carries its labels
+and segment records). Why processes, and why written here rather than taken from a library: the
+work is mostly Python-level (scipy's small least-squares fits, numpy on a few thousand points), so
+threads serialise on the GIL; ``concurrent.futures`` and ``joblib`` would pickle the whole cloud into
 every task, which costs more than a cluster's recognition.
 
 Each task is a pure function of its points, so its result is the one this process would compute,

@@ -231,14 +231,13 @@ def _recognised_ahead(seen: list[np.ndarray], families: list[Family], ctx: Conte
     wait = ctx.workers.submit("cluster", [(seen[k], families, None) for k in todo], ctx)
     if wait is None:
         return lambda k: None
-    got: dict[int, tuple | None] = {}
+    waited: list[dict[int, tuple]] = []
 
     def result(k: int) -> tuple[list[Candidate], list[Candidate] | None] | None:
-        if not got:
+        if not waited:
             done = wait()
-            got.update(zip(todo, done) if done is not None else {})
-            got[-1] = None  # waited
-        return got.get(k)
+            waited.append(dict(zip(todo, done)) if done is not None else {})
+        return waited[0].get(k)
 
     return result
 
