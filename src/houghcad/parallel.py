@@ -181,21 +181,15 @@ class Workers:
         """For each ``(idx, families, extra)``, what ``what`` (see :func:`_task`) gives on the points
         ``idx`` (all free), computed on the workers, in job order; None when the jobs are not worth
         handing out or ``ctx`` cannot be rebuilt there (the caller then runs them itself)."""
-        payload = self._payload(what, jobs, ctx)
-        if payload is None:
-            return None
-        assert self.pool is not None
-        try:
-            return _swap_families(self.pool.map(_task, payload, chunksize=1), self.by_name.__getitem__)
-        except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
-            return None
+        wait = self.submit(what, jobs, ctx, min_jobs=2)
+        return None if wait is None else wait()
 
-    def submit(self, what: str, jobs: "list[tuple[np.ndarray, list[Family], Any]]", ctx: "Context") \
-            -> "Callable[[], list[Any] | None] | None":
-        """As :meth:`run`, without waiting (even one job is handed out: the caller works beside
-        it): a function that waits for the results and returns them in job order, or None when
-        they do not pickle. None as :meth:`run`."""
-        payload = self._payload(what, jobs, ctx, min_jobs=1)
+    def submit(self, what: str, jobs: "list[tuple[np.ndarray, list[Family], Any]]", ctx: "Context",
+               min_jobs: int = 1) -> "Callable[[], list[Any] | None] | None":
+        """As :meth:`run`, without waiting (by default even one job is handed out: the caller works
+        beside it): a function that waits for the results and returns them in job order, or None
+        when they do not pickle. None as :meth:`run`."""
+        payload = self._payload(what, jobs, ctx, min_jobs)
         if payload is None:
             return None
         assert self.pool is not None
