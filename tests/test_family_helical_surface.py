@@ -142,3 +142,20 @@ def test_a_thread_finer_than_the_inlier_band_is_not_valid():
     # Every point lies within a quarter period of a flank: below the band, any point fits.
     assert not FAM.valid(thread(4 * 0.5 * RESOLVED_QUARTER_TAUS * ctx.tau), ctx)
     assert FAM.valid(thread(4 * 1.5 * RESOLVED_QUARTER_TAUS * ctx.tau), ctx)
+
+
+@pytest.mark.parametrize("seed", [3, 19])
+def test_profile_pitch_recovers_the_pitch_that_blurred_normals_lower(seed):
+    # Deep fine threads (period 0.3-0.4 R2) at 0.5 % noise: the widened normals average both flanks
+    # towards a cylinder's, and the normal lines' pitch comes out 13 % and 54 % low (seeds 3, 19).
+    # Sorted along w = z - p φ, the radii trace one profile only at the true pitch.
+    from houghcad.families._helix import NOISY_TRIM, screw_placement
+    from houghcad.families.helical_surface import profile_pitch
+    from houghcad.preprocess import preprocess
+
+    c = synth.single("helical_surface", seed=seed, n_points=4000, noise=0.005, missing=0.1)
+    pre = preprocess(c.points)
+    pl, p0, _ = screw_placement(pre.points, pre.normals, NOISY_TRIM)
+    true = c.primitives[0]["params"]["k1"] * c.primitives[0]["params"]["n"] * pre.transform.scale
+    assert abs(p0 / true - 1) > 0.1
+    assert abs(profile_pitch(pl.local(pre.points, pre.normals)[0], p0) / true - 1) < 0.02

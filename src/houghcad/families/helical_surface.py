@@ -41,6 +41,16 @@ RESOLVED_QUARTER_TAUS = 0.75
 #: Residual evaluations of the orthogonal-distance refinement after the Sampson fit (each
 #: finds every point's foot): it starts close, a few Gauss–Newton steps.
 ORTHOGONAL_EVALUATIONS = 20
+#: The pitch search's span either side of the normal lines' pitch (factor). On a thread finer than
+#: the normals' neighbourhood the normals average over both flanks towards a cylinder's, whose
+#: normal lines meet the axis (pitch 0): measured 0.45-0.97 of the true pitch on noisy random
+#: threads, the finest deep ones lowest.
+PITCH_SPAN = 4.0
+#: Relative steps of the pitch search, coarse then fine: the profile stays sharp within about
+#: 1 % of the pitch over the three to four periods a thread of the benchmark spans.
+PITCH_STEPS = (0.04, 0.01)
+#: Points the pitch search sorts per trial pitch (a seeded subsample of larger sets).
+PITCH_POINTS = 1500
 
 
 def harmonic_phase(rho: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -52,6 +62,40 @@ def harmonic_phase(rho: np.ndarray, theta: np.ndarray) -> np.ndarray:
     b = np.einsum("mki,m->ki", D, rho)
     sol = np.linalg.solve(M, b[..., None])[..., 0]
     return np.arctan2(sol[:, 2], sol[:, 1])
+
+
+def profile_pitch(Pl: np.ndarray, p0: float, seed: int = 0) -> float:
+    """Pitch p (local units per radian) that makes the points' radius ρ one function of
+    w = z − p φ, searched within a factor :data:`PITCH_SPAN` of ``p0`` (same sign).
+
+    Points ``Pl`` (m, 3) in a frame whose z axis is the screw axis. On the helical surface
+    ρ = A + B cos((w − k2)/k1) exactly when p = k1 n, so sorted by w the radii of neighbours
+    differ only by the noise and the profile's slope (their mean absolute difference, the
+    roughness); any other p smears the profile. It needs no normals, which a fine thread blurs:
+    the normals' pitch ``p0`` only bounds the search.
+    """
+    if p0 == 0 or len(Pl) < 16:
+        return p0
+    if len(Pl) > PITCH_POINTS:
+        Pl = Pl[np.sort(np.random.default_rng(seed).choice(len(Pl), PITCH_POINTS, replace=False))]
+    rho, phi, z = np.hypot(Pl[:, 0], Pl[:, 1]), np.arctan2(Pl[:, 1], Pl[:, 0]), Pl[:, 2]
+
+    def best(ps: np.ndarray) -> float:
+        W = z[None, :] - ps[:, None] * phi[None, :]  # (k, m)
+        roughness = np.mean(np.abs(np.diff(rho[np.argsort(W, axis=1)], axis=1)), axis=1)
+        return float(ps[int(np.argmin(roughness))])
+
+    coarse, fine = PITCH_STEPS
+    k = int(np.ceil(np.log(PITCH_SPAN) / np.log1p(coarse)))
+    p = best(p0 * (1 + coarse) ** np.arange(-k, k + 1))
+    m = int(np.ceil(np.log1p(coarse) / np.log1p(fine)))
+    return best(p * (1 + fine) ** np.arange(-m, m + 1))
+
+
+def _pitch(Pl: np.ndarray, Nl: np.ndarray, seed: int) -> float:
+    """The screw's pitch in the local frame: the normal lines' (invariant under rigid motions),
+    sharpened on the profile (:func:`profile_pitch`)."""
+    return profile_pitch(Pl, axis_from_normal_lines(Pl, Nl)[2], seed)
 
 
 def _profile(A, B, psi):
@@ -161,7 +205,7 @@ class HelicalSurface(Family):
             return []  # no screw motion
         rng = np.random.default_rng(ctx.seed)
         sel = np.arange(len(Pl)) if len(Pl) <= 1500 else np.sort(rng.choice(len(Pl), 1500, replace=False))
-        pl.info.update(p=p, local=Pl[sel])
+        pl.info.update(p=profile_pitch(Pl, p, ctx.seed), local=Pl[sel])
         return [pl]
 
     @staticmethod
@@ -171,7 +215,7 @@ class HelicalSurface(Family):
         return [(s * m, abs(p) / m * (1 - K1_WINDOW), abs(p) / m * (1 + K1_WINDOW)) for m in range(1, MAX_STARTS + 1)]
 
     def region(self, Pl, Nl, ctx):
-        p = axis_from_normal_lines(Pl, Nl)[2]  # pitch: invariant, recomputed in the local frame
+        p = _pitch(Pl, Nl, ctx.seed)
         rho = np.hypot(Pl[:, 0], Pl[:, 1])
         lo, hi = float(np.quantile(rho, 0.01)), float(np.quantile(rho, 0.99))
         wins = self._k1_windows(p)
@@ -182,7 +226,7 @@ class HelicalSurface(Family):
         return Grid((lo, 0.0, l0), (hi, 0.6 * span, l1), (nr, nr, nk))
 
     def gamma(self, Pl, Nl, grid, ctx):
-        p = axis_from_normal_lines(Pl, Nl)[2]
+        p = _pitch(Pl, Nl, ctx.seed)
         rng = np.random.default_rng(ctx.seed)
         sel = np.arange(len(Pl)) if len(Pl) <= 800 else np.sort(rng.choice(len(Pl), 800, replace=False))
         X = Pl[sel]
