@@ -4,7 +4,8 @@
 Usage::
 
     python benchmarks/ablation.py [--fit4cad DIR] [--jobs 2] [--only PATTERN,...] [--list]
-                                  [--no-write] [--max-variants N]
+                                  [--no-write] [--max-variants N] [--cache DIR] [--older DIR]
+                                  [--report-only]
 
 For every variant it segments the Fit4CAD training clouds (faces scored, as
 ``benchmarks/fit4cad.py`` does) and a set of synthetic parts (simple parts at noise 0, 0.002 and
@@ -27,8 +28,11 @@ instead of 19.
 
 Each variant's rows are cached in ``benchmarks/results/ablation/<variant>.csv``; a later run only
 computes the variants not cached yet (delete a file to recompute it), so the study can be spread
-over several sessions. Unless ``--no-write``, the table goes between the ``<!-- ablation:begin/end
--->`` markers of BENCHMARKS.md.
+over several sessions. The folder's ``COMMIT`` names the code it was measured on. An earlier study,
+on older code, moves to a folder ``benchmarks/results/ablation-<commit>`` (``--older``): the report
+takes a variant the current study has not measured from the newest older study that has, against
+that study's own baseline, and says so in its ``code`` column. Unless ``--no-write``, the table goes
+between the ``<!-- ablation:begin/end -->`` markers of BENCHMARKS.md.
 """
 
 from __future__ import annotations
@@ -375,34 +379,81 @@ def summarise(base: list[dict], rows: list[dict]) -> dict:
     return out
 
 
-def table(results: dict[str, list[dict]], order: list[Variant]) -> list[str]:
-    base = results["baseline"]
-    f4 = [r for r in base if r["kind"] == "fit4cad"]
+@dataclass(frozen=True)
+class Study:
+    """One ablation study: its variants' rows, measured on one commit's code against its baseline."""
+
+    commit: str
+    baseline: list[dict]
+    rows: dict[str, list[dict]]
+
+    @classmethod
+    def read(cls, cache: Path) -> "Study | None":
+        if not (cache / "baseline.csv").exists():
+            return None
+        commit = (cache / "COMMIT").read_text().strip() if (cache / "COMMIT").exists() else ""
+        rows = {p.stem: _read(p) for p in sorted(cache.glob("*.csv"))}
+        return cls(commit, rows.pop("baseline"), rows)
+
+
+def _commit_time(folder: Path) -> int:
+    """Commit time (s) of the code a study folder was measured on; 0 when git does not know it."""
+    import subprocess
+
+    try:
+        commit = (folder / "COMMIT").read_text().strip()
+        out = subprocess.run(["git", "log", "-1", "--format=%ct", commit], cwd=REPO, capture_output=True,
+                             text=True, check=True).stdout.strip()
+        return int(out)
+    except (OSError, ValueError, subprocess.CalledProcessError):
+        return 0
+
+
+def older_studies() -> list[Path]:
+    """The earlier studies' folders (``benchmarks/results/ablation-*``), newest code first."""
+    return sorted(CACHE.parent.glob("ablation-*"), key=lambda p: (_commit_time(p), p.name), reverse=True)
+
+
+def _baseline_line(study: Study) -> str:
+    f4 = [r for r in study.baseline if r["kind"] == "fit4cad"]
     folds = [np.mean([r["dsc"] for r in f4 if int(re.sub(r"\D", "", r["name"])) % FOLDS == k]) for k in range(FOLDS)]
+    return (f"`{study.commit[:7]}`: Fit4CAD mean DSC {np.mean([r['dsc'] for r in f4]):.4f}, folds "
+            + ", ".join(f"{x:.4f}" for x in folds) + f"; median time {np.median([r['seconds'] for r in f4]):.2f} s.")
+
+
+def table(studies: list[Study], order: list[Variant]) -> list[str]:
+    """The report: each variant from the first study in ``studies`` that measured it, against that
+    study's baseline."""
     syn_cols = [f"parts@{nz:g}" for nz in PART_NOISE] + [f"composites@{nz:g}" for nz in COMPOSITE_NOISE]
-    lines = [f"Baseline: Fit4CAD mean DSC {np.mean([r['dsc'] for r in f4]):.4f}, folds "
-             + ", ".join(f"{x:.4f}" for x in folds) + f"; median time {np.median([r['seconds'] for r in f4]):.2f} s.",
-             "",
-             "Changes against the baseline (DSC in thousandths; time: median seconds per Fit4CAD cloud, in %; "
-             "variants run at different moments on a shared 2-core machine, so only large time changes mean "
-             "anything). `not read`: no Fit4CAD cloud's run reads the tolerance or switch, or the pass changes "
-             "none (noisy-policy or complex-family code on Fit4CAD's clean `simple` run, for instance); "
-             "`runs`: on how many of the 188 clouds the change can act, the others keep the baseline's row.",
-             "",
-             "| variant | runs | fold 0 | fold 1 | fold 2 | fold 3 | fold 4 | mean | time | "
-             + " | ".join(syn_cols) + " |",
-             "|---|" + "---|" * (8 + len(syn_cols))]
+    source = {v.name: next((st for st in studies if v.name in st.rows), None) for v in order if v.name != "baseline"}
+    used = [st for st in studies if any(src is st for src in source.values())]
+    lines = ["Baselines, one per study the table draws on (the code each was measured on):", ""]
+    lines += [f"- {_baseline_line(st)}" for st in used]
+    lines += ["",
+              "Changes against the baseline of the variant's study, `code` (DSC in thousandths; time: median "
+              "seconds per Fit4CAD cloud, in %; "
+              "variants run at different moments on a shared 2-core machine, so only large time changes mean "
+              "anything). `not read`: no Fit4CAD cloud's run reads the tolerance or switch, or the pass changes "
+              "none (noisy-policy or complex-family code on Fit4CAD's clean `simple` run, for instance); "
+              "`runs`: on how many of the 188 clouds the change can act, the others keep the baseline's row.",
+              "",
+              "| variant | code | runs | fold 0 | fold 1 | fold 2 | fold 3 | fold 4 | mean | time | "
+              + " | ".join(syn_cols) + " |",
+              "|---|" + "---|" * (9 + len(syn_cols))]
     for v in order:
-        if v.name == "baseline" or v.name not in results:
+        study = source.get(v.name)
+        if study is None:
             continue
-        s = summarise(base, results[v.name])
+        rows = study.rows[v.name]
+        s = summarise(study.baseline, rows)
         if "folds" in s:
             cells = [f"{1000 * d:+.1f}" for d in s["folds"]] + [f"**{1000 * s['mean']:+.1f}**",
                                                                  f"{100 * s['time']:+.0f}%"]
         else:
             cells = ["not read"] * 5 + ["not read", ""]
-        f4_rows = [r for r in results[v.name] if r["kind"] == "fit4cad"]
+        f4_rows = [r for r in rows if r["kind"] == "fit4cad"]
         cells.insert(0, str(sum(not r.get("reused") for r in f4_rows)) if f4_rows else "")
+        cells.insert(0, f"`{study.commit[:7]}`")
         cells += [f"{1000 * s[c]:+.1f}" if c in s else "" for c in syn_cols]
         lines.append(f"| `{v.name}` | " + " | ".join(cells) + " |")
     return lines
@@ -465,6 +516,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-write", action="store_true")
     ap.add_argument("--cache", type=Path, default=CACHE, help="folder of the per-variant CSVs (default %(default)s)")
     ap.add_argument("--report-only", action="store_true", help="compute nothing: the table of the cached variants")
+    ap.add_argument("--older", type=Path, action="append", default=None,
+                    help="an earlier study's folder, for the variants --cache lacks (repeatable; default: "
+                         "benchmarks/results/ablation-*, newest first)")
     a = ap.parse_args(argv)
     if not (a.list or a.report_only or a.fit4cad.is_dir()):
         # Without the clouds every variant would be measured on the synthetic cases alone, and
@@ -473,13 +527,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     order = variants()
     cache = a.cache
+    older = older_studies() if a.older is None else a.older
     cache.mkdir(parents=True, exist_ok=True)
     commit_file = cache / "COMMIT"
     if not commit_file.exists():  # the code the cached variants were measured on
         commit_file.write_text(_head() + "\n")
     if a.list:
+        measured = [st for st in map(Study.read, older) if st is not None]
         for v in order:
-            print(f"{'cached ' if (cache / f'{v.name}.csv').exists() else '       '}{v.name}")
+            where = "cached " if (cache / f"{v.name}.csv").exists() else \
+                next((f"{st.commit[:7]}" for st in measured if v.name in st.rows), "       ")
+            print(f"{where} {v.name}")
         return 0
     todo = [v for v in order if v.name == "baseline" or not a.only or
             any(re.search(p, v.name) for p in a.only.split(","))]
@@ -491,21 +549,26 @@ def main(argv: list[str] | None = None) -> int:
             _run_variants(pool, todo[:1], a.fit4cad, cache)
             todo = todo[1:]
         _run_variants(pool, todo, a.fit4cad, cache)
-    results = {v.name: _read(cache / f"{v.name}.csv") for v in order if (cache / f"{v.name}.csv").exists()}
-    if "baseline" not in results:
+    studies = [st for st in map(Study.read, [cache, *older]) if st is not None]
+    if not (cache / "baseline.csv").exists():
         print("no baseline yet", file=sys.stderr)
         return 1
-    lines = table(results, order)
+    lines = table(studies, order)
     print("\n".join(lines))
     if not a.no_write:
         sys.path.insert(0, str(REPO / "benchmarks"))
         from fit4cad import publish_section
 
-        measured = sum(v.name in results for v in order) - 1
+        names = [v.name for v in order if v.name != "baseline"]
+        per = [(st.commit[:10], sum(n in st.rows and all(n not in o.rows for o in studies[:i])
+                                   for n in names)) for i, st in enumerate(studies)]
+        measured = sum(k for _, k in per)
         publish_section("ablation", "Ablation", "ablation.py", argv, [
-            f"- {measured} of {len(order) - 1} variants measured, on the code of commit "
-            f"`{commit_file.read_text().strip()[:10]}`; `python benchmarks/ablation.py --list` lists them. "
-            "Each variant: the 188 Fit4CAD training clouds (`simple`, faces scored) and the synthetic parts "
+            f"- {measured} of {len(names)} variants measured: "
+            + ", ".join(f"{k} on the code of commit `{c}`" for c, k in per if k)
+            + "; `python benchmarks/ablation.py --list` lists them. Each study has its own baseline (below); "
+            "a variant is reported from the newest study that measured it. Each variant: the 188 Fit4CAD "
+            "training clouds (`simple`, faces scored) and the synthetic parts "
             "(seeds 0-1, 12000 points), run only on the cases whose baseline run read what the variant changes "
             "(a tolerance, a noise-policy switch) or where the pass it skips changed the state; the other cases "
             "keep the baseline's row, exactly (the script's docstring). Cheapest variants first, the passes, "

@@ -82,3 +82,27 @@ def test_association_only_variant_matches_a_whole_run(clean_block):
     (row,) = ablation.run_association_task(task)
     whole = ablation.run_task((v, "parts", "block_with_hole_and_slot", (0.0, 0, "simple")))
     assert row["dsc"] == whole["dsc"] and not row.get("error")
+
+
+def _study(folder: Path, commit: str, dscs: dict[str, list[float]]) -> Path:
+    """A cached study: per variant, the DSC of Fit4CAD clouds PC0..PC4 (one per fold)."""
+    folder.mkdir()
+    (folder / "COMMIT").write_text(commit + "\n")
+    for name, values in dscs.items():
+        rows = [dict(variant=name, kind="fit4cad", name=f"PC{i}", key=f"PC{i}", dsc=d, seconds=1.0)
+                for i, d in enumerate(values)]
+        ablation._write(folder / f"{name}.csv", rows)
+    return folder
+
+
+def test_report_takes_each_variant_from_the_newest_study_against_its_own_baseline(tmp_path):
+    new = _study(tmp_path / "new", "a" * 40, {"baseline": [0.9] * 5, "skip-fillets": [0.8] * 5})
+    old = _study(tmp_path / "old", "b" * 40, {"baseline": [0.5] * 5, "skip-fillets": [0.1] * 5,
+                                              "skip-refine": [0.6] * 5})
+    studies = [ablation.Study.read(new), ablation.Study.read(old)]
+    order = [ablation.Variant("baseline"), ablation.Variant("skip-fillets", skip=("fillets",)),
+             ablation.Variant("skip-refine", skip=("refine",)), ablation.Variant("skip-consolidation")]
+    rows = {line.split(" | ")[0]: line for line in ablation.table(studies, order) if line.startswith("| `")}
+    assert set(rows) == {"| `skip-fillets`", "| `skip-refine`"}   # unmeasured variants are left out
+    assert "`aaaaaaa`" in rows["| `skip-fillets`"] and "**-100.0**" in rows["| `skip-fillets`"]
+    assert "`bbbbbbb`" in rows["| `skip-refine`"] and "**+100.0**" in rows["| `skip-refine`"]
