@@ -91,11 +91,14 @@ def revisit_poor_fits(seg: Segmentation, families: list[Family], ctx: Context) -
     replaced = False
     for n, k in enumerate(todo):
         s = seg[k]
-        if voted is None:
+        if voted is not None:
+            found = voted[n]
+        else:
             avail = np.zeros(len(P), bool)
             avail[s.indices] = True
+            found = candidates(s.indices, families, lctx, avail)
         cover = []
-        for c in voted[n] if voted is not None else candidates(s.indices, families, lctx, avail):
+        for c in found:
             if len(c.indices) < t.dominant * len(s.indices):
                 continue
             # The candidate's share of the segment, compared there.
@@ -181,8 +184,9 @@ def _revote_groups(seg: Segmentation, cplx: list[Family], per_cluster: list[Fami
         # The groups are disjoint and a group's vote marks its own members
         # only: their first votes are known before the first is taken (on the
         # run's workers, side by side, when there are some).
-        for members, first in zip(groups, _first_votes(seg, groups, vote)):
-            added += _vote_group(seg, members, vote, removed, ctx, first)
+        placed = [_region(seg, m, np.array([len(seg[k].indices) for k in m]), vote) for m in groups]
+        for group, first in zip(placed, _first_votes(placed, vote)):
+            added += _vote_group(seg, group, vote, removed, ctx, first)
     if added:
         seg.remove(np.flatnonzero(removed))
         accept(added, seg, ctx)
@@ -222,11 +226,11 @@ def _between(keep: np.ndarray, edges: np.ndarray) -> np.ndarray:
     return edges[keep[edges[:, 0]] & keep[edges[:, 1]]] if len(edges) else edges
 
 
-def _vote_group(seg: Segmentation, members: np.ndarray, vote: _Vote, removed: np.ndarray,
-                ctx: Context, first: list[Candidate] | None = None) -> list[Candidate]:
-    """The candidates that replace two or more of the group's ``members``
-    (segment ids); their ids are marked in ``removed`` (bool (m,)). ``first``:
-    the group's first recognition when already known (:func:`_first_votes`).
+def _vote_group(seg: Segmentation, group: _Group, vote: _Vote, removed: np.ndarray, ctx: Context,
+                first: list[Candidate] | None = None) -> list[Candidate]:
+    """The candidates that replace two or more of a group's members (segment
+    ids); their ids are marked in ``removed`` (bool (m,)). ``first``: the
+    group's region's recognition when already known (:func:`_first_votes`).
 
     A carved surface is cut into comparable pieces; a face that dominates its
     group (the plane a torus meets) is not one of them. Where the vote takes
@@ -236,17 +240,14 @@ def _vote_group(seg: Segmentation, members: np.ndarray, vote: _Vote, removed: np
     """
     t = ctx.tol.consolidation
     P = ctx.pre.points
-    sizes = np.array([len(seg[m].indices) for m in members])
     added: list[Candidate] = []
     retries = t.peel_retries
-    while True:
-        members, sizes, region = _region(seg, members, sizes, vote)
-        if region is None:
-            break
+    while group.region is not None:
+        members = group.members
         if first is None:
             avail = np.zeros(len(P), bool)
-            avail[region] = True
-            first = recognize(region, vote.families, vote.ctx, avail)
+            avail[group.region] = True
+            first = recognize(group.region, vote.families, vote.ctx, avail)
         took = False
         for c in first:
             got = _covered(c, [seg[m] for m in members], ctx)
@@ -264,30 +265,37 @@ def _vote_group(seg: Segmentation, members: np.ndarray, vote: _Vote, removed: np
         if took or not vote.peel or retries == 0:
             break
         retries -= 1
-        keep = np.arange(len(members)) != np.argmax(sizes)
-        members, sizes, first = members[keep], sizes[keep], None
+        keep = np.arange(len(members)) != np.argmax(group.sizes)
+        group, first = _region(seg, members[keep], group.sizes[keep], vote), None
     return added
 
 
-def _region(seg: Segmentation, members: np.ndarray, sizes: np.ndarray, vote: _Vote) \
-        -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """The members (ids) and sizes of a group that :func:`_vote_group` votes on, after the
-    dominant faces are set aside, and their points (sorted global indices), or None when too
-    few are left or one still dominates."""
+@dataclass(frozen=True)
+class _Group:
+    """A group :func:`_vote_group` votes on, its dominant faces set aside (:func:`_region`)."""
+
+    members: np.ndarray  # segment ids (m,)
+    sizes: np.ndarray  # their point counts (m,)
+    region: np.ndarray | None  # their points (sorted global indices); None: too few left, or one dominates
+
+
+def _region(seg: Segmentation, members: np.ndarray, sizes: np.ndarray, vote: _Vote) -> _Group:
+    """The group of ``members`` (ids) of ``sizes`` points that :func:`_vote_group` votes on, after
+    the dominant faces are set aside."""
     share = vote.ctx.tol.consolidation.peel_share
     while vote.peel and len(members) >= 2 and sizes.max() > share * sizes.sum():
         keep = np.arange(len(members)) != np.argmax(sizes)
         members, sizes = members[keep], sizes[keep]
     if len(members) < 2 or sizes.max() > share * sizes.sum():
-        return members, sizes, None
-    return members, sizes, np.sort(np.concatenate([seg[m].indices for m in members]))
+        return _Group(members, sizes, None)
+    return _Group(members, sizes, np.sort(np.concatenate([seg[m].indices for m in members])))
 
 
-def _first_votes(seg: Segmentation, groups: list[np.ndarray], vote: _Vote) -> list[list[Candidate] | None]:
-    """The first recognition of each group (members' ids) by :func:`_vote_group`, computed on the
-    run's workers; None for those left to it (all of them without workers)."""
+def _first_votes(groups: list[_Group], vote: _Vote) -> list[list[Candidate] | None]:
+    """The first recognition of each group's region by :func:`_vote_group`, computed on the run's
+    workers; None for those left to it (all of them without workers)."""
     out: list[list[Candidate] | None] = [None] * len(groups)
-    regions = [_region(seg, m, np.array([len(seg[k].indices) for k in m]), vote)[2] for m in groups]
+    regions = [g.region for g in groups]
     todo = [i for i, r in enumerate(regions) if r is not None]
     workers = vote.ctx.workers
     got = workers.run("recognize", [(regions[i], vote.families, None) for i in todo], vote.ctx) if workers else None

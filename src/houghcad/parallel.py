@@ -164,15 +164,20 @@ class Workers:
             return None
         return out
 
+    def _rebuilt(self, ctx: "Context", fams: "list[Family]") -> dict[str, Any] | None:
+        """:meth:`_overrides` of ``ctx``, or None also when one of ``fams`` is not the run's own
+        family of its name (the workers know the families by name only)."""
+        if any(self.by_name.get(f.name) is not f for f in fams):
+            return None
+        return self._overrides(ctx)
+
     def _payload(self, what: str, jobs: "list[tuple[np.ndarray, list[Family], Any]]",
                  ctx: "Context", min_jobs: int = 2) -> list[tuple] | None:
         """The tasks of ``jobs`` for :func:`_task`, or None when they are not worth handing out
         (fewer than ``min_jobs``, or few points) or cannot be rebuilt in the workers."""
         if self.pool is None or len(jobs) < min_jobs or sum(len(j[0]) for j in jobs) < PARALLEL_MIN_POINTS:
             return None
-        if any(self.by_name.get(f.name) is not f for j in jobs for f in j[1]):
-            return None
-        overrides = self._overrides(ctx)
+        overrides = self._rebuilt(ctx, [f for j in jobs for f in j[1]])
         if overrides is None:
             return None
         return [(what, np.asarray(idx), [f.name for f in fams], overrides, extra) for idx, fams, extra in jobs]
@@ -211,9 +216,8 @@ class Workers:
         read ``seg``. None as :meth:`run`, or when a family is not one of the run's."""
         if self.pool is None or len(items) < 2 * self.n_jobs:
             return None
-        overrides = self._overrides(ctx)
-        if overrides is None or any(self.by_name.get(f.name) is not f
-                                    for f in [*fams, *(r.family for r in seg.records)]):
+        overrides = self._rebuilt(ctx, [*fams, *(r.family for r in seg.records)])
+        if overrides is None:
             return None
         records = _swap_families(list(seg.records), _FamilyName)
         names = [f.name for f in fams]
