@@ -288,3 +288,11 @@ def test_summary_gives_wall_time_and_the_projection_to_a_large_dataset():
     expected = "10.00 worker-seconds per cloud, so 10,000 such clouds on 16 workers would take about 1.7 h"
     assert expected in bench.summary_text(s) and "wall time: 10.0 s with 2 worker(s)" in bench.summary_text(s)
     assert expected in bench.section_markdown("t", rows, s, "python x", "2024-01-01", "m")
+
+
+def test_main_wants_a_label_for_a_run_that_is_not_a_preset_at_full_density(tiny_set: Path, capsys):
+    # Its section would otherwise replace the default run's.
+    assert bench.main([str(tiny_set), "--no-write", "--fraction", "0.5"]) == 2
+    assert "--label" in capsys.readouterr().err
+    assert bench.main([str(tiny_set), "--no-write", "--families", "plane,cylinder"]) == 2
+    assert "--label" in capsys.readouterr().err

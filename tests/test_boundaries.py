@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -11,9 +12,10 @@ import houghcad
 from _helpers import context, plane_candidate, state_before
 from houghcad.context import Context
 from houghcad import synth
-from houghcad.boundaries import _sides, dissolve_redundant, settle_edges, settle_noisy_edges
+from houghcad.boundaries import _sides, dissolve_redundant, edge_points, settle_edges, settle_noisy_edges
 from houghcad.families import REGISTRY
 from houghcad.families.base import Primitive
+from houghcad.result import Result
 from houghcad.state import Candidate, Segmentation
 
 
@@ -74,21 +76,28 @@ def test_settle_edges_leaves_a_face_its_points_where_a_small_surface_crosses_it(
     assert (seg.labels[band[near[band]]] == 0).all()
 
 
-def test_settle_edges_keeps_a_tangent_band_with_the_face_it_lies_on():
-    # A plane continues a quarter cylinder tangentially. The cylinder's points beside the
-    # tangent line lie within tau of the plane (their distance grows as x^2 / 2) and exactly on
-    # their own cylinder: they stay. The rows on both surfaces go to the smaller plane.
+def _tangent_quarter_cylinder() -> tuple[np.ndarray, int, Context, Primitive]:
+    """A quarter cylinder (radius 1 about the y axis, its first points) continued tangentially by
+    a plane z = 1: the points, the number of cylinder points, the context and the cylinder."""
     rng = np.random.default_rng(0)
     th = rng.uniform(np.pi / 2, np.pi, 6000)
     cyl = np.column_stack([np.cos(th), rng.uniform(-1, 1, 6000), np.sin(th)])
     flat = np.column_stack([rng.uniform(0, 0.3, 800), rng.uniform(-1, 1, 800), np.ones(800)])
     P = np.vstack([cyl, flat])
-    nc = len(cyl)
     ctx = context(P)
-    T, X = ctx.pre.transform, ctx.pre.points
-    cfam, pfam = REGISTRY["cylinder"], REGISTRY["plane"]
+    T = ctx.pre.transform
     prim = Primitive("cylinder", {"axis_point": T.points(np.zeros((1, 3)))[0],
                                   "axis": T.dirs(np.array([[0.0, 1.0, 0.0]]))[0], "radius": 1.0 / T.inv_length(1.0)})
+    return P, len(cyl), ctx, prim
+
+
+def test_settle_edges_keeps_a_tangent_band_with_the_face_it_lies_on():
+    # A plane continues a quarter cylinder tangentially. The cylinder's points beside the
+    # tangent line lie within tau of the plane (their distance grows as x^2 / 2) and exactly on
+    # their own cylinder: they stay. The rows on both surfaces go to the smaller plane.
+    P, nc, ctx, prim = _tangent_quarter_cylinder()
+    X = ctx.pre.points
+    cfam, pfam = REGISTRY["cylinder"], REGISTRY["plane"]
     d_own = cfam.distance(prim, X[:nc])
     plane = plane_candidate(ctx, np.arange(nc, len(P)))
     seg = Segmentation.of(len(P), [Candidate(cfam, prim, np.arange(nc), 0.0, d_own), plane])
@@ -292,3 +301,68 @@ def test_a_sliver_stays_when_its_neighbours_are_neither_larger_nor_of_a_segments
     seg, ctx, _ = _pieces_and_sliver(min_points=8)
     dissolve_redundant(seg, ctx, max(0.3 * ctx.spacing, ctx.tau), ctx.link)
     assert seg.sizes().tolist() == [7, 7, 10]
+
+
+def _l_bracket(rng: np.random.Generator) -> tuple[np.ndarray, int]:
+    """Two faces meeting at a right-angled crease along the y axis, each sampled with its
+    boundary row on the crease (as a CAD sampler does): a floor z = 0, x in [0, 1], and a wall
+    x = 0, z in [0, 1]. The points and the index of the first wall point."""
+    row = np.column_stack([np.zeros(60), np.linspace(-1, 1, 60), np.zeros(60)])
+    floor = np.column_stack([rng.uniform(0.02, 1, 1500), rng.uniform(-1, 1, 1500), np.zeros(1500)])
+    wall = np.column_stack([np.zeros(1500), rng.uniform(-1, 1, 1500), rng.uniform(0.02, 1, 1500)])
+    return np.vstack([row, floor, wall]), 60 + 1500
+
+
+def test_edge_points_are_the_crease_row_reported_with_the_other_face():
+    P, w = _l_bracket(np.random.default_rng(0))
+    ctx = context(P)
+    floor = plane_candidate(ctx, np.arange(w))  # the floor took the crease row
+    wall = plane_candidate(ctx, np.arange(w, len(P)))
+    seg = Segmentation.of(len(P), [floor, wall])
+    edges = edge_points(seg, ctx)
+    assert [len(e) for e in edges] == [1, 1]
+    assert len(edges[0][0]) == 0  # the floor owns every point it shares
+    # The wall: the crease row, and nothing else. A row point is read for the other face when one
+    # of its 12 nearest points within the link is that face's: nearly all of them.
+    assert set(edges[1][0].tolist()) <= set(range(60)) and len(edges[1][0]) >= 54
+
+
+def test_edge_points_at_a_tangent_contact_are_its_rows_not_the_band_beside():
+    # A plane continuing a quarter cylinder tangentially: the cylinder's points beside the tangent
+    # line lie within tau of the plane (their distance grows as x^2 / 2), but only the rows on
+    # the line lie on both surfaces to a tenth of tau.
+    P, nc, ctx, prim = _tangent_quarter_cylinder()
+    cyl = Candidate(REGISTRY["cylinder"], prim, np.arange(nc), 0.0, np.zeros(nc))
+    plane = plane_candidate(ctx, np.arange(nc, len(P)))
+    seg = Segmentation.of(len(P), [cyl, plane])
+    listed = edge_points(seg, ctx)[1][0]  # the cylinder's points listed with the plane
+    d_plane = REGISTRY["plane"].distance(plane.prim, ctx.pre.points[:nc])
+    beside = np.isfinite(cKDTree(ctx.pre.points[nc:]).query(ctx.pre.points[:nc], distance_upper_bound=ctx.link)[0])
+    band = np.flatnonzero(beside & (d_plane > 0.5 * ctx.tau) & (d_plane < ctx.tau))
+    assert len(band) >= 10 and len(listed) >= 10
+    assert not np.isin(band, listed).any()
+    assert (d_plane[listed] <= 0.1 * ctx.tau).all()
+
+
+def test_edge_points_none_on_noisy_clouds():
+    P, w = _l_bracket(np.random.default_rng(1))
+    ctx = context(P)
+    seg = Segmentation.of(len(P), [plane_candidate(ctx, np.arange(w)), plane_candidate(ctx, np.arange(w, len(P)))])
+    assert sum(len(e) for es in edge_points(seg, ctx) for e in es) > 0
+    noisy = replace(ctx, policy=replace(ctx.policy, nearest_edges=True))
+    assert sum(len(e) for es in edge_points(seg, noisy) for e in es) == 0
+
+
+def test_faces_of_a_result_hold_their_boundary_curves():
+    # Through the whole pipeline and the JSON: the crease row is in both faces' points, owned by
+    # one of them.
+    P, _ = _l_bracket(np.random.default_rng(2))
+    res = houghcad.segment(P, seed=0)
+    assert sorted(s.type for s in res.segments) == ["plane", "plane"]
+    a, b = res.faces()
+    both = np.intersect1d(a, b)
+    assert set(both.tolist()) <= set(range(60)) and len(both) >= 54
+    for s in res.segments:
+        assert not np.isin(s.edges, s.indices).any()  # other segments' points
+    again = Result.from_dict(json.loads(res.to_json()))
+    assert all(np.array_equal(x, y) for x, y in zip(again.faces(), res.faces()))

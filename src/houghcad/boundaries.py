@@ -299,3 +299,48 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
     for a, parts in add.items():
         seg.assign(np.concatenate(parts), a)
     seg.remove(gone)
+
+
+def edge_points(seg: Segmentation, ctx: Context) -> list[list[np.ndarray]]:
+    """Each segment's pieces' boundary curves (extension): for segment k and each of its pieces
+    (``seg.parts[k]``, or the segment whole), the points (global indices, sorted) that pieces of
+    other segments own and that lie on this piece's boundary curve.
+
+    A CAD sample includes the faces' boundary curves, and a point sampled on one lies on both
+    faces (the Fit4CAD ground truth lists it in both), at a crease as where one face continues
+    another tangentially. Its owner is one of them (:func:`settle_edges`); here it is also
+    reported with the other: it has a neighbour (within the link distance) in the other piece
+    and lies within ``boundaries.edge_taus`` τ of both surfaces. Clean clouds only: on noisy ones
+    no point lies on a curve to within the noise."""
+    pieces = [list(seg.parts[k]) if seg.parts is not None else [seg.indices(k)] for k in range(len(seg))]
+    out = [[np.zeros(0, dtype=np.int64) for _ in p] for p in pieces]
+    if len(seg) < 2 or ctx.policy.nearest_edges:
+        return out
+    n = seg.n_points
+    of_seg = [(k, i) for k, ps in enumerate(pieces) for i in range(len(ps))]  # piece → (segment, its piece)
+    piece = np.full(n, -1, dtype=np.int64)
+    for j, (k, i) in enumerate(of_seg):
+        piece[pieces[k][i]] = j
+    seg_of = np.array([k for k, _ in of_seg], dtype=np.int64)
+    nb, near = ctx.pre.neighbours_within(ctx.tol.boundaries.neighbours, ctx.link, threads(ctx))
+    other = np.where(near, piece[nb], -1)
+    # Pieces of one segment are one surface: each would hold the other's points.
+    mask = (other >= 0) & (piece[:, None] >= 0) & (seg_of[np.maximum(other, 0)] != seg_of[np.maximum(piece, 0)][:, None])
+    if not mask.any():
+        return out
+    key = np.unique(other[mask].astype(np.int64) * n + np.nonzero(mask)[0])
+    pairs = np.stack([key // n, key % n], axis=1)  # (piece that may list it, point), by piece then point
+    P = ctx.pre.points[pairs[:, 1]]
+    on = np.ones(len(pairs), dtype=bool)
+    for which in (pairs[:, 0], piece[pairs[:, 1]]):
+        segs = seg_of[which]
+        for k in np.unique(segs):
+            at = np.flatnonzero(segs == k)
+            s = seg[int(k)]
+            on[at] &= s.family.distance(s.prim, P[at]) <= ctx.tol.boundaries.edge_taus * ctx.tau
+    got = pairs[on]
+    starts = np.flatnonzero(np.r_[True, got[1:, 0] != got[:-1, 0]]) if len(got) else np.zeros(0, dtype=np.int64)
+    for a, b in zip(starts, np.r_[starts[1:], len(got)]):
+        k, i = of_seg[int(got[a, 0])]
+        out[k][i] = got[a:b, 1]
+    return out

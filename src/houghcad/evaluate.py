@@ -381,15 +381,15 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
             f"{gt_file}: index {gt_max + 1} (1-based) exceeds the result's n_points {n}"
         )
     for s in result.segments:
-        idx = s.indices
-        if idx.ndim != 1:
-            raise InputError(f"{rpath}: segment {s.id} indices are not a flat list")
-        if idx.size and (idx.min() < 0 or idx.max() >= n):
-            bad = int(idx.min()) if idx.min() < 0 else int(idx.max())
-            raise InputError(f"{rpath}: segment {s.id} index {bad} out of range [0, {n})")
+        for idx in (s.indices, s.edges, *(p.edges for p in s.parts)):
+            if idx.ndim != 1:
+                raise InputError(f"{rpath}: segment {s.id} indices are not a flat list")
+            if idx.size and (idx.min() < 0 or idx.max() >= n):
+                bad = int(idx.min()) if idx.min() < 0 else int(idx.max())
+                raise InputError(f"{rpath}: segment {s.id} index {bad} out of range [0, {n})")
     # Fit4CAD's ground truth has one segment per CAD face: by default a
     # maximal primitive is scored by its connected parts.
-    pred = [s.indices for s in result.segments] if maximal else result.faces()
+    pred = [s.with_edges() for s in result.segments] if maximal else result.faces()
     measures = classification_measures(pred, gt, n)
     return {
         "measures": {k: measures[k] for k in MEASURES},

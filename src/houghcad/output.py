@@ -23,13 +23,15 @@ MAX_REFIT_POINTS = 4000
 
 
 def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed, points: np.ndarray,
-                   seed: int, distances: np.ndarray | None = None) -> tuple[list[Segment], list[Group]]:
+                   seed: int, distances: np.ndarray | None = None,
+                   edges: list[list[np.ndarray]] | None = None) -> tuple[list[Segment], list[Group]]:
     """The output segments (largest first) and groups, world coordinates.
 
     ``seg`` holds the associated segments with their parts
     (:attr:`Segmentation.parts`); ``points`` (n, 3) are the input's.
     ``distances`` (n,), when given, receives each segmented point's distance
-    to its segment's fitted surface (world units).
+    to its segment's fitted surface (world units). ``edges[k][i]``, when given, are the points on
+    the boundary curves of segment k's i-th piece (:func:`houghcad.boundaries.edge_points`).
     """
     T = pre.transform
     order = sorted(range(len(seg)), key=lambda k: (-len(seg.indices(k)), int(seg.indices(k)[0])))
@@ -56,16 +58,19 @@ def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed,
         params, mfe = fitted(r.family, r.prim, idx, r.fixed, record=True)
         parts = []
         pieces = seg.parts[k] if seg.parts is not None else [idx]
+        rims = edges[k] if edges is not None else [np.zeros(0, dtype=np.int64)] * len(pieces)
         if len(pieces) > 1:
-            for p in sorted(pieces, key=lambda a: (-len(a), int(a[0]))):
-                pp, pm = fitted(r.family, r.prim, p)
-                parts.append(Part(indices=p.astype(np.int64), params=pp, mfe=pm))
+            for i in sorted(range(len(pieces)), key=lambda i: (-len(pieces[i]), int(pieces[i][0]))):
+                pp, pm = fitted(r.family, r.prim, pieces[i])
+                parts.append(Part(indices=pieces[i].astype(np.int64), params=pp, mfe=pm,
+                                  edges=rims[i].astype(np.int64)))
         desc = world_descriptors(r.family, r.family.descriptors(r.prim), T)
         frame = r.family.frame(r.prim)
         axis = T.inv_dirs(frame.direction) if frame is not None and frame.direction is not None else None
         desc["extent"] = extent(points[idx], axis).tolist()
+        rim = np.unique(np.concatenate(rims)).astype(np.int64) if len(rims) else np.zeros(0, dtype=np.int64)
         out.append(Segment(id=len(out), type=r.family.name, indices=idx.astype(np.int64),
-                           params=params, mfe=mfe, parts=parts, descriptors=desc))
+                           params=params, mfe=mfe, parts=parts, descriptors=desc, edges=rim))
     out_groups = []
     for g in groups:
         fam = seg.records[g.members[0]].family

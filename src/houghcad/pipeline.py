@@ -21,7 +21,7 @@ import numpy as np
 from . import families as fam_mod
 from .associate import Associator
 from .blend import find_fillets
-from .boundaries import dissolve_redundant, settle_edges, settle_noisy_edges
+from .boundaries import dissolve_redundant, edge_points, settle_edges, settle_noisy_edges
 from .consolidation import consolidate, revisit_poor_fits
 from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
 from .errors import InputError
@@ -450,7 +450,10 @@ class Segmenter:
         t = time.perf_counter()
         run.progress("output", _OUTPUT_AT)
         distances = np.full(len(points), np.nan)
-        out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed, distances)
+        # Boundary curves on the cloud recognition ran on; a subsampled cloud's points are not
+        # the CAD sample's own (nor on its curves).
+        edges = edge_points(seg, run.ctx) if picked is None else None
+        out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed, distances, edges)
         timing = {**timing, "output": time.perf_counter() - t}
         timing["total"] = sum(v for k, v in timing.items() if k != "total")
         ctx = run.ctx

@@ -42,6 +42,10 @@ class Segment:
     descriptors : dict
         Position-independent descriptors (``radius``, ``half_angle``,
         ``extent`` ...), world units.
+    edges : ndarray of int64, shape (E,)
+        Points that other segments own and that lie on this segment's boundary curves, on both
+        surfaces (:func:`houghcad.boundaries.edge_points`; clean clouds), sorted; with parts,
+        the union of theirs.
     """
 
     id: int
@@ -51,10 +55,20 @@ class Segment:
     mfe: float
     parts: list["Part"] = field(default_factory=list)
     descriptors: dict[str, Any] = field(default_factory=dict)
+    edges: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def faces(self) -> list[np.ndarray]:
-        """Index arrays of the segment's connected pieces (one when it has no parts)."""
-        return [p.indices for p in self.parts] if self.parts else [self.indices]
+        """Index arrays of the segment's connected pieces (one when it has no parts), each with
+        the points of its boundary curves (:attr:`edges`): a CAD face holds its boundary, and a
+        point on it is on both faces."""
+        if self.parts:
+            return [p.with_edges() for p in self.parts]
+        return [self.with_edges()]
+
+    def with_edges(self) -> np.ndarray:
+        """The segment's points and its boundary curves' (sorted): the maximal primitive as
+        ``houghcad evaluate --maximal`` scores it."""
+        return _union(self.indices, self.edges)
 
     def to_dict(self) -> dict[str, Any]:
         d = {
@@ -65,6 +79,7 @@ class Segment:
             "params": _jsonable(self.params),
             "descriptors": _jsonable(self.descriptors),
             "indices": [int(i) for i in self.indices],
+            "edge_indices": [int(i) for i in self.edges],
         }
         if self.parts:
             d["parts"] = [p.to_dict() for p in self.parts]
@@ -80,6 +95,7 @@ class Segment:
             mfe=float(d.get("mfe", float("nan"))),
             parts=[Part.from_dict(p) for p in d.get("parts", [])],
             descriptors=dict(d.get("descriptors", {})),
+            edges=np.asarray(d.get("edge_indices", []), dtype=np.int64),
         )
 
 
@@ -94,20 +110,34 @@ class Part:
     params : dict
         The piece's own parameters (world coordinates).
     mfe : float
+    edges : ndarray of int64, shape (E,)
+        Points other pieces own on this piece's boundary curves (see :attr:`Segment.edges`).
     """
 
     indices: np.ndarray
     params: dict[str, Any]
     mfe: float
+    edges: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    def with_edges(self) -> np.ndarray:
+        """The piece's points and its boundary curves' (sorted)."""
+        return _union(self.indices, self.edges)
 
     def to_dict(self) -> dict[str, Any]:
         return {"n_points": int(len(self.indices)), "mfe": float(self.mfe),
-                "params": _jsonable(self.params), "indices": [int(i) for i in self.indices]}
+                "params": _jsonable(self.params), "indices": [int(i) for i in self.indices],
+                "edge_indices": [int(i) for i in self.edges]}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Part":
         return cls(indices=np.asarray(d["indices"], dtype=np.int64), params=dict(d.get("params", {})),
-                   mfe=float(d.get("mfe", float("nan"))))
+                   mfe=float(d.get("mfe", float("nan"))),
+                   edges=np.asarray(d.get("edge_indices", []), dtype=np.int64))
+
+
+def _union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Sorted union of two index arrays (``a`` itself when ``b`` is empty)."""
+    return np.union1d(a, b).astype(np.int64) if len(b) else a
 
 
 #: Kinds of :class:`Group`, in the order they are reported.
