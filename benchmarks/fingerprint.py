@@ -45,14 +45,17 @@ def _num(v) -> object:
 
 
 def fingerprint(result) -> str:
-    """SHA-256 (hex) of a Result's segments, parts, groups and unsegmented points."""
+    """SHA-256 (hex) of a Result's segments, parts (with their boundary curves), groups and
+    unsegmented points."""
     h = hashlib.sha256()
     for s in result.segments:
         h.update(s.type.encode())
         h.update(np.asarray(s.indices, np.int64).tobytes())
         h.update(json.dumps(_num(s.params), sort_keys=True).encode())
+        h.update(np.asarray(s.edges, np.int64).tobytes())
         for p in s.parts:
             h.update(np.asarray(p.indices, np.int64).tobytes())
+            h.update(np.asarray(p.edges, np.int64).tobytes())
     for g in result.groups:
         h.update(json.dumps([g.kind, list(g.members)]).encode())
     h.update(np.asarray(result.unsegmented, np.int64).tobytes())

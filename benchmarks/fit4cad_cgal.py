@@ -17,7 +17,8 @@ For every cloud, one at a time on an otherwise idle machine:
   not timed.
 
 Both are scored with the Fit4CAD measures against the ground truth: houghcad on the faces of its
-JSON (a maximal primitive's parts, as ``--fit4cad`` writes them), CGAL on its shapes. The issue's
+JSON (a maximal primitive's parts with their boundary curves, as ``--fit4cad`` writes them), CGAL
+on its shapes. The issue's
 figure is the median wall time per cloud, houghcad's against CGAL's: ≤ 1.5.
 
 The summary goes between the ``<!-- cgal:begin/end -->`` markers of BENCHMARKS.md, and a dated
@@ -57,12 +58,11 @@ def _timed(cmd: list[str]) -> tuple[float, str]:
 
 
 def _faces(doc: dict) -> list[np.ndarray]:
-    """The faces of a houghcad JSON: each segment's parts, or the segment when it has none."""
-    out = []
-    for s in doc["segments"]:
-        for part in s.get("parts") or [s]:
-            out.append(np.asarray(part["indices"], dtype=np.int64))
-    return out
+    """The faces of a houghcad JSON, as ``--fit4cad`` writes them: each segment's parts, or the
+    segment when it has none, each with its boundary curves (:meth:`houghcad.Result.faces`)."""
+    from houghcad.result import Result
+
+    return Result.from_dict(doc).faces()
 
 
 def measure(name: str, cloud: Path, gt_path: Path, work: Path) -> dict:
@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
              "",
              f"- Median wall time per cloud, houghcad's against CGAL's: **{ratio:.2f}×** (target ≤ 1.5×); "
              f"per cloud, the median of the ratios: {np.median(h / c):.2f}×.",
-             "- DSC: houghcad on the faces of its JSON, CGAL on its shapes (a failure scores nothing and is "
+             "- DSC: houghcad on the faces of its JSON (with their boundary curves), CGAL on its shapes (a failure scores nothing and is "
              "left out of the mean)."]
     publish_section("cgal", "Fit4CAD clouds against CGAL, process start included", "fit4cad_cgal.py", argv, [
         f"- Clouds: {len(rows)}, one at a time; each tool in a fresh process per cloud, its wall time "
