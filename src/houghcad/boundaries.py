@@ -318,14 +318,15 @@ def edge_points(seg: Segmentation, ctx: Context) -> list[list[np.ndarray]]:
         return out
     n = seg.n_points
     of_seg = [(k, i) for k, ps in enumerate(pieces) for i in range(len(ps))]  # piece → (segment, its piece)
-    piece = np.full(n, -1, dtype=np.int64)
+    piece = np.full(n, -1, dtype=np.int32)  # int32: the (n, k) table of neighbours' pieces below
     for j, (k, i) in enumerate(of_seg):
         piece[pieces[k][i]] = j
-    seg_of = np.array([k for k, _ in of_seg], dtype=np.int64)
+    seg_of = np.array([k for k, _ in of_seg], dtype=np.int32)
     nb, near = ctx.pre.neighbours_within(ctx.tol.boundaries.neighbours, ctx.link, threads(ctx))
     other = np.where(near, piece[nb], -1)
     # Pieces of one segment are one surface: each would hold the other's points.
-    mask = (other >= 0) & (piece[:, None] >= 0) & (seg_of[np.maximum(other, 0)] != seg_of[np.maximum(piece, 0)][:, None])
+    own_seg = np.where(piece >= 0, seg_of[np.maximum(piece, 0)], -1)
+    mask = (other >= 0) & (own_seg[:, None] >= 0) & (seg_of[np.maximum(other, 0)] != own_seg[:, None])
     if not mask.any():
         return out
     key = np.unique(other[mask].astype(np.int64) * n + np.nonzero(mask)[0])
