@@ -303,7 +303,7 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
 
 def edge_points(seg: Segmentation, ctx: Context) -> list[list[np.ndarray]]:
     """Each segment's pieces' boundary curves (extension): for segment k and each of its pieces
-    (``seg.parts[k]``, or the segment whole), the points (global indices, sorted) that pieces of
+    (:meth:`Segmentation.pieces`), the points (global indices, sorted) that pieces of
     other segments own and that lie on this piece's boundary curve.
 
     A CAD sample includes the faces' boundary curves, and a point sampled on one lies on both
@@ -312,7 +312,7 @@ def edge_points(seg: Segmentation, ctx: Context) -> list[list[np.ndarray]]:
     reported with the other: it has a neighbour (within the link distance) in the other piece
     and lies within ``boundaries.edge_taus`` τ of both surfaces. Clean clouds only: on noisy ones
     no point lies on a curve to within the noise."""
-    pieces = [list(seg.parts[k]) if seg.parts is not None else [seg.indices(k)] for k in range(len(seg))]
+    pieces = [seg.pieces(k) for k in range(len(seg))]
     out = [[np.zeros(0, dtype=np.int64) for _ in p] for p in pieces]
     if len(seg) < 2 or ctx.policy.nearest_edges:
         return out

@@ -57,7 +57,7 @@ def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed,
         r, idx = seg.records[k], seg.indices(k)
         params, mfe = fitted(r.family, r.prim, idx, r.fixed, record=True)
         parts = []
-        pieces = seg.parts[k] if seg.parts is not None else [idx]
+        pieces = seg.pieces(k)
         rims = edges[k] if edges is not None else [np.zeros(0, dtype=np.int64)] * len(pieces)
         if len(pieces) > 1:
             for i in sorted(range(len(pieces)), key=lambda i: (-len(pieces[i]), int(pieces[i][0]))):

@@ -196,6 +196,11 @@ class Segmentation:
             self._cache[k] = np.flatnonzero(self.labels == k)
         return self._cache[k]
 
+    def pieces(self, k: int) -> list[np.ndarray]:
+        """Segment k's connected pieces: its :attr:`parts` once the association set them, else
+        the segment whole (one piece)."""
+        return list(self.parts[k]) if self.parts is not None else [self.indices(k)]
+
     @property
     def free(self) -> np.ndarray:
         """Bool mask (n,) of the points no segment holds (a copy)."""
