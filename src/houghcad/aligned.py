@@ -17,7 +17,7 @@ import numpy as np
 
 from .context import Context
 from .families import Family
-from .families.base import Primitive
+from .families.base import Primitive, axial
 from .preprocess import rotation_to_z
 from .recognize import dense_subsets, select
 from .state import Candidate, Segmentation, mean_fitting_error
@@ -66,11 +66,33 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
         if cone is not None:
             lines += _axis_lines([prim])
     # What the features leave must be a small share of the cluster, or fewer points than any
-    # segment holds: a counterbore's step a few points wide is no feature of its own.
+    # segment holds: a counterbore's step a few points wide is no feature of its own. Short of
+    # that, the cylinders that fit exactly over more than one ring are features all the same (a
+    # bore beside the chamfer of an edge, whose rows fit no aligned feature).
     left = len(cl) - sum(len(c.indices) for c in out)
-    if not out or (left > (1.0 - t.aligned_cover) * len(cl) and left >= ctx.min_points):
-        return []
-    return select(out, seg.free, ctx)
+    if out and left > (1.0 - t.aligned_cover) * len(cl) and left >= ctx.min_points:
+        out = [e for e in (_exact_over_rings(c, ctx) for c in out) if e is not None]
+    return select(out, seg.free, ctx) if out else []
+
+
+def _exact_over_rings(c: Candidate, ctx: Context) -> Candidate | None:
+    """``c`` refitted on its own points when it is a cylinder that fits them to the rounding of
+    an exact fit and reaches over more than one ring of them along its axis (evidence of its
+    own, where one ring lies on every cylinder through it); else None. The aligned fit also
+    took the neighbours' boundary rows: refitted on the piece alone it is exact or no cylinder.
+    Under noise no fit is exact (σ is a third of τ)."""
+    t = ctx.tol.splitting
+    if c.family.name != "cylinder":
+        return None
+    P = ctx.pre.points[c.indices]
+    prim = c.family.fit(c.prim, P, ctx.pre.normals[c.indices])
+    if prim is None or not c.family.valid(prim, ctx):
+        return None
+    d = c.family.distance(prim, P)
+    h, _ = axial(P, prim.params["axis_point"], prim.params["axis"])
+    if d.mean() > t.aligned_exact_taus * ctx.tau or np.ptp(h) < t.aligned_rings_spacings * ctx.pre.spacing:
+        return None
+    return Candidate(c.family, prim, c.indices, mean_fitting_error(d, P), d)
 
 
 def _pieces(fam: Family, prim: Primitive, sel: np.ndarray, ctx: Context) -> list[Candidate]:

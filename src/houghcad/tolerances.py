@@ -141,6 +141,11 @@ class SplittingTolerances:
                                    "to the rounding of an exact fit: a torus fillet's arc or a crease fits a cone "
                                    "to 0.04-0.6 τ")
     aligned_cover: float = tol(0.8, "share", "the aligned features must explain this much of the cluster together")
+    aligned_exact_taus: float = tol(0.02, "τ", "short of that cover, an aligned cylinder stays if it fits its points "
+                                    "to the rounding of an exact fit ...")
+    aligned_rings_spacings: float = tol(0.5, "spacings", "... over more than one ring: its points this far apart "
+                                        "along its axis. Two rings of one radius lie on one cylinder only where "
+                                        "the part has one, while one ring lies on every cylinder and cone through it")
     crease_neighbours: int = tol(6, "points", "a cluster's crease point takes the PCA normal of this many of the "
                                  "cluster's points: on a hole a few spacings wide, more reach across it")
     crease_row_ratio: float = tol(0.05, "eigenvalue ratio", "a neighbourhood whose middle spread is under this share "
