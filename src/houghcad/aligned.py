@@ -31,7 +31,8 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
     Features are taken in turn, each the largest aligned circle, level or cone among the points
     the ones before it left (at most ``aligned_pieces``); their pieces are dense subsets of at
     least ``ctx.min_points`` and together hold ``aligned_cover`` of the cluster, or leave fewer
-    than ``ctx.min_points`` of it."""
+    than ``ctx.min_points`` of it; short of that, only the cylinders exact over more than one
+    ring of points stay (:func:`_exact_over_rings`)."""
     fams = {f.name: f for f in families}
     cyl, plane = fams.get("cylinder"), fams.get("plane")
     # On a noisy cloud one cylinder of all the points is fitted (see one_aligned_cylinder): a
