@@ -191,12 +191,12 @@ def main(argv: list[str] | None = None) -> int:
                           lambda rs: f"{rs[0]['cloud']}: DSC {1 - sum(r['loss'] for r in rs):.3f}")
     rows = [r for rs in per_cloud for r in rs]
     if a.out:
-        tmp = a.out.with_name(a.out.name + ".tmp")
-        with open(tmp, "w", newline="") as fh:
+        from houghcad.io import atomic_write
+
+        with atomic_write(a.out) as fh:  # whole or not at all
             w = csv.DictWriter(fh, fieldnames=list(FaceRow.__dataclass_fields__))
             w.writeheader()
             w.writerows(rows)
-        tmp.replace(a.out)
     mean = 1 - sum(r["loss"] for r in rows) / len(clouds)
     lens = "" if a.fraction == 1 else f" at {a.fraction:g} of the points"
     notes = [f"- Clouds: {len(clouds)}{lens}; faces: {len(rows)}; mean DSC {mean:.4f} (faces scored, simple families, "
