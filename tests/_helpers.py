@@ -60,3 +60,26 @@ def wide_cylinder(ctx: Context, flat: Candidate) -> tuple[Primitive, np.ndarray]
     R = 50.0 * ctx.pre.diagonal
     foot = c0 - (c0 @ n - flat.prim.params["offset"]) * n
     return Primitive("cylinder", {"axis_point": foot + R * n, "axis": e, "radius": R}), np.cross(n, e)
+
+
+def rim_rows(flat_land: bool) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Exact samples (spacing 0.5) of the row of points at radius 10 around the z axis, and of the
+    two discs of faces beside it whose boundary rows run along it. A rim (``flat_land`` False):
+    the row at z = 0.5 between the discs z = 0 and z = 1 (radius 10 each: their edge rows are
+    the rim's own edge rows). A flat land: the row at z = 0 between the disc z = 0 inside
+    (radius 9.5) and the ring z = 0 outside (radii 10.5 to 12). Returns the points and the
+    index arrays of the row and of the two neighbours."""
+    s = 0.5
+
+    def rings(radii, z):
+        return np.concatenate([np.c_[r * np.cos(t), r * np.sin(t), np.full(len(t), z)]
+                               for r in radii
+                               for t in [np.linspace(0, 2 * np.pi, max(int(2 * np.pi * r / s), 1), endpoint=False)]])
+
+    if flat_land:
+        row, a, b = rings([10.0], 0.0), rings(np.arange(0.0, 9.75, s), 0.0), rings(np.arange(10.5, 12.25, s), 0.0)
+    else:
+        row, a, b = rings([10.0], 0.5), rings(np.arange(0.0, 10.25, s), 0.0), rings(np.arange(0.0, 10.25, s), 1.0)
+    pts = np.r_[row, a, b]
+    ends = np.cumsum([0, len(row), len(a), len(b)])
+    return pts, [np.arange(ends[i], ends[i + 1]) for i in range(3)]

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from houghcad.adjacency import SegmentGraph, smooth_adjacency
-from _helpers import context, plane_candidate
+from _helpers import context, plane_candidate, rim_rows
+from houghcad.adjacency import SegmentGraph, border_points, row_support, smooth_adjacency
+from houghcad.families import REGISTRY
+from houghcad.families.base import Primitive
 from houghcad.state import Segmentation
 
 
@@ -83,3 +86,26 @@ def test_smooth_adjacency_joins_coplanar_pieces_not_faces_at_an_edge():
     anyhow = {tuple(e) for e in smooth_adjacency(seg, ctx, smooth=False).tolist()}
     assert (0, 1) in smooth and not {(0, 2), (1, 2)} & smooth
     assert {(0, 2), (1, 2)} & anyhow
+
+
+def test_border_points_are_the_neighbouring_faces_rows_and_the_surface_through_them_holds_them():
+    pts, (row, a, b) = rim_rows(False)
+    ctx = context(pts)
+    seg = Segmentation.of(len(pts), [plane_candidate(ctx, a), plane_candidate(ctx, b)])
+    border = border_points(row, seg.labels, ctx, 12)
+    assert len(border) and np.isin(border, np.r_[a, b]).all()
+    P = ctx.pre.points
+    # Every point there is within a link of the row, and the discs' edge rows are among them.
+    assert (cKDTree(P[row]).query(P[border])[0] <= ctx.link).all()
+    edge = np.r_[a, b][np.abs(np.linalg.norm(pts[np.r_[a, b], :2], axis=1) - 10.0) < 1e-9]
+    assert np.isin(edge, border).all()
+    T = ctx.pre.transform
+    cyl = Primitive("cylinder", {"axis_point": T.points(np.zeros((1, 3)))[0],
+                                 "axis": T.dirs(np.array([[0.0, 0.0, 1.0]]))[0], "radius": 10.0 * T.scale})
+    level = Primitive("plane", {"normal": T.dirs(np.array([[0.0, 0.0, 1.0]]))[0],
+                                "offset": float(T.dirs(np.array([[0.0, 0.0, 1.0]]))[0] @ P[row[0]])})
+    assert row_support(REGISTRY["cylinder"], cyl, border, ctx) >= len(edge)
+    assert row_support(REGISTRY["plane"], level, border, ctx) == 0
+    # Points of the row's own segment are not its border.
+    seg2 = Segmentation.of(len(pts), [plane_candidate(ctx, a), plane_candidate(ctx, b), plane_candidate(ctx, row)])
+    assert not np.isin(border_points(row, seg2.labels, ctx, 12), row).any()

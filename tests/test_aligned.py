@@ -3,6 +3,8 @@ across a neighbour's axis or normal, and cones about a hole's axis, found from t
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 import houghcad
@@ -141,8 +143,6 @@ def test_a_counterbore_whose_step_is_under_a_segments_size_keeps_its_hole_and_bo
 def test_short_of_the_cover_an_exact_cylinder_over_two_rings_stays_and_one_ring_does_not():
     # Two rings of one radius lie on one cylinder only by design; one ring lies on every
     # cylinder through it; a noisy fit is never exact.
-    from dataclasses import replace
-
     from houghcad.aligned import _exact_over_rings
     from houghcad.families import REGISTRY
     from houghcad.families.base import Primitive
@@ -178,3 +178,19 @@ def test_a_bore_beside_a_chamfered_edge_is_found_though_the_chamfer_fits_no_feat
     got, _ = _faces_by_name(cloud, houghcad.segment(cloud.points, families="simple", seed=0))
     t, dsc, size = got["counterbore 4 bore"]
     assert size >= 20 and t == "cylinder" and dsc >= 0.9, (t, dsc, size)
+
+
+def test_a_row_between_two_faces_takes_the_feature_their_boundary_rows_lie_on():
+    # A free row at radius 10 lies on its level and on the cylinder about the discs' normal alike;
+    # the discs' edge rows beside it decide: on the cylinder for a rim, on the level for a flat land.
+    from _helpers import plane_candidate, rim_rows
+    from houghcad.aligned import aligned_features
+    from houghcad.state import Segmentation
+
+    for flat_land, kept in ((False, "cylinder"), (True, "plane")):
+        pts, (row, a, b) = rim_rows(flat_land)
+        ctx = context(pts)
+        seg = Segmentation.of(len(pts), [plane_candidate(ctx, a), plane_candidate(ctx, b)])
+        got = aligned_features(row, select_families("simple"), seg, replace(ctx, local=True))
+        assert [c.family.name for c in got] == [kept], flat_land
+        assert len(got[0].indices) == len(row)

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from _helpers import context, plane_candidate, wide_cylinder
+from _helpers import context, plane_candidate, rim_rows, wide_cylinder
 from houghcad import synth
 from houghcad.families import REGISTRY, select
 from houghcad.families.base import Primitive
@@ -184,3 +184,22 @@ def test_noisy_edge_strips_are_not_taken_by_planes():
     seg = Segmentation.of(len(pts), [Candidate(REGISTRY["cylinder"], cyl, idx, 0.0, np.zeros(len(idx)))])
     prefer_planes(seg, select("simple"), ctx)
     assert len(seg) <= 1
+
+
+
+def test_a_rows_surface_is_the_one_its_neighbours_boundary_rows_lie_on():
+    # The middle row of a rim whose edge rows went to the discs beside it lies on its own level
+    # plane and on the rim's cylinder alike: the discs' edge rows lie on the cylinder, so it stays.
+    # The same row between two coplanar faces (a flat land): their rows lie on the plane, which
+    # takes it.
+    for flat_land, kept in ((False, "cylinder"), (True, "plane")):
+        pts, (row, a, b) = rim_rows(flat_land)
+        ctx = context(pts)
+        P, T = ctx.pre.points, ctx.pre.transform
+        cyl = Primitive("cylinder", {"axis_point": T.points(np.zeros((1, 3)))[0],
+                                     "axis": T.dirs(np.array([[0.0, 0.0, 1.0]]))[0], "radius": 10.0 * T.scale})
+        assert REGISTRY["cylinder"].distance(cyl, P[row]).max() < 1e-9
+        planes = [plane_candidate(ctx, idx) for idx in (a, b)]
+        seg = Segmentation.of(len(P), [Candidate(REGISTRY["cylinder"], cyl, row, 0.0, np.zeros(len(row))), *planes])
+        prefer_planes(seg, select("simple"), ctx)
+        assert seg[0].family.name == kept, flat_land

@@ -14,12 +14,17 @@ read it with their own rule:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .context import Context, threads
 from .state import Segmentation
+
+if TYPE_CHECKING:
+    from .families import Family
+    from .families.base import Primitive
 
 
 @dataclass(frozen=True)
@@ -155,3 +160,28 @@ def smooth_adjacency(seg: Segmentation, ctx: Context, smooth: bool = True,
         angle = t.crease_angles * ctx.angle if crease is None else crease
         keep &= g.agreement(sn, float(np.cos(angle))) >= t.smooth_share
     return g.edges[keep]
+
+
+def border_points(idx: np.ndarray, labels: np.ndarray, ctx: Context, k: int) -> np.ndarray:
+    """Points (global indices, sorted) that segments other than the points ``idx``' own hold among
+    each point's ``k`` nearest within the link: the boundary rows of the neighbouring faces.
+    ``labels`` (n,): each point's segment, -1 free."""
+    P = ctx.pre.points
+    if not len(idx):
+        return np.zeros(0, np.int64)
+    dist, nb = ctx.pre.tree.query(P[idx], k=min(k, len(P)), distance_upper_bound=ctx.link)
+    nb = np.unique(nb[np.isfinite(dist)])
+    own = np.unique(labels[idx])
+    return nb[(labels[nb] >= 0) & ~np.isin(labels[nb], own)]
+
+
+def row_support(family: Family, prim: Primitive, border: np.ndarray, ctx: Context) -> int:
+    """How many of the boundary points ``border`` (global indices) lie within τ of ``prim``.
+
+    A face one or two rows wide lies on every surface through its rows (a circle on its plane, on
+    a cylinder, a cone, a sphere through it), so its own points cannot choose among them. The
+    neighbouring faces' boundary rows on either side lie on the face as well, as its boundary
+    curves: the surface that holds them is the face's."""
+    if not len(border):
+        return 0
+    return int((family.distance(prim, ctx.pre.points[border]) <= ctx.tau).sum())

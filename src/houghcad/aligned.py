@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .adjacency import border_points, row_support
 from .context import Context
 from .families import Family
 from .families.base import Primitive, axial
@@ -111,7 +112,8 @@ def _largest_feature(rest: np.ndarray, border: np.ndarray, axes: list[np.ndarray
     """The aligned cylinder or plane with the most of the points ``rest`` (global indices)
     within τ, as ``(family, primitive, inlier mask (m,))``, or None when none holds
     ``ctx.min_points``; cylinders refitted with the boundary points ``border``
-    (:func:`_refined`). A level wins a tie: a plane is the simpler surface."""
+    (:func:`_refined`). Of two that hold as many, the one the boundary points hold more of
+    (:func:`houghcad.adjacency.row_support`), then a level: a plane is the simpler surface."""
     X = ctx.pre.points[rest]
     noisy = ctx.policy.one_aligned_cylinder
     found = []
@@ -128,10 +130,13 @@ def _largest_feature(rest: np.ndarray, border: np.ndarray, axes: list[np.ndarray
             foot = np.array([c[0], c[1], Q[on if on.any() else slice(None), 2].mean()])
             prim = Primitive("cylinder", {"axis_point": R.T @ foot, "axis": a.copy(), "radius": r})
             found.append((cyl, *_refined(cyl, prim, on, rest, border, ctx)))
-    best, count = None, ctx.min_points - 1
+    # A row of points (a band two or three rows high, its edge rows gone to the faces beside it)
+    # lies on its level and on the cylinder through it alike: the boundary rows beside it decide.
+    best, key = None, (ctx.min_points, -1)
     for fam, prim, on in found:
-        if on.sum() > count:
-            best, count = (fam, prim, on), on.sum()
+        k = (int(on.sum()), row_support(fam, prim, border, ctx))
+        if k > key:
+            best, key = (fam, prim, on), k
     return best
 
 
@@ -275,11 +280,7 @@ def _largest_cone(X: np.ndarray, N: np.ndarray, lines: list[tuple[np.ndarray, np
 def _adjacent(cl: np.ndarray, seg: Segmentation, ctx: Context) -> tuple[list[int], np.ndarray]:
     """The segments with a point within ``ctx.link`` of the cluster ``cl``, and those points
     (global indices)."""
-    P = ctx.pre.points
-    dist, nb = ctx.pre.tree.query(P[cl], k=min(ctx.tol.splitting.aligned_neighbours, len(P)),
-                                  distance_upper_bound=ctx.link)
-    nb = np.unique(nb[np.isfinite(dist)])
-    border = nb[seg.labels[nb] >= 0]
+    border = border_points(cl, seg.labels, ctx, ctx.tol.splitting.aligned_neighbours)
     return np.unique(seg.labels[border]).tolist(), border
 
 

@@ -8,11 +8,11 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .adjacency import SegmentGraph
+from .adjacency import SegmentGraph, border_points, row_support
 from .context import Context
 from .families import Family
 from .families.base import Primitive
-from .state import SegmentRecord, Segmentation
+from .state import SegmentRecord, Segmentation, SegmentView
 
 #: Families whose segments a plane, or planes, may take.
 CURVED = ("cylinder", "cone", "sphere", "torus")
@@ -32,7 +32,10 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
     or by the rounding of exact fits (``cover_taus``), which decides on exact
     samples: a strip one or two rows wide (a chamfer, a land) lies on a plane
     and on every cylinder through its rows, and the blended normals there
-    often vote the cylinder alone. Curved segments that fit their points
+    often vote the cylinder alone. The boundary rows of the faces beside the
+    strip decide between the two: a curve that fits exactly and holds more of
+    them than the plane stays (:func:`_rows_curve`: the middle row of a band
+    whose edge rows went to its neighbours). Curved segments that fit their points
     loosely may then go to several planes (:func:`split_into_facets`). A
     ``fixed`` primitive (a fillet found by :mod:`houghcad.blend`) stays.
     """
@@ -54,13 +57,27 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
             prim = plane.fit(Primitive("plane", {"normal": n0, "offset": float(n0 @ c)}), Q, N[s.indices])
             if prim is not None:
                 d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
-                if d_pl.mean() <= d_own.mean() + max(t.plane_se * d_own.std() / np.sqrt(len(Q)), exact):
+                if d_pl.mean() <= d_own.mean() + max(t.plane_se * d_own.std() / np.sqrt(len(Q)), exact) \
+                        and not _rows_curve(s, prim, d_own, plane, seg, k, ctx):
                     seg.set_record(k, SegmentRecord(plane, prim))
                     changed += 1
                     continue
         if d_own.mean() > t.facet_exact_ratio * exact:
             loose[k] = d_own
     return changed + split_into_facets(seg, loose, plane, ctx)
+
+
+def _rows_curve(s: SegmentView, prim: Primitive, d_own: np.ndarray, plane: Family, seg: Segmentation, k: int,
+                ctx: Context) -> bool:
+    """Whether the curved segment ``s`` (id ``k``; its points at distances ``d_own`` from its
+    surface), which the plane ``prim`` fits as well, keeps its curve: it fits its points to the
+    rounding of an exact fit, and the neighbouring faces' boundary rows beside it lie on the curve
+    more than on the plane (a band whose edge rows went to its neighbours: its middle row lies on
+    its own plane too, :func:`houghcad.adjacency.row_support`)."""
+    if d_own.mean() > ctx.tol.consolidation.cover_taus * ctx.tau:
+        return False
+    border = border_points(s.indices, seg.labels, ctx, ctx.tol.splitting.aligned_neighbours)
+    return row_support(s.family, s.prim, border, ctx) > row_support(plane, prim, border, ctx)
 
 
 def split_into_facets(seg: Segmentation, loose: dict[int, np.ndarray], plane: Family, ctx: Context) -> int:
