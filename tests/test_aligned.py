@@ -8,9 +8,10 @@ from dataclasses import replace
 import numpy as np
 
 import houghcad
-from _helpers import context
+from _helpers import context, plane_candidate
 from houghcad import synth
-from houghcad.aligned import _best_circle, _best_level, _circumcircles, _largest_cone
+from houghcad.aligned import _best_circle, _best_level, _circumcircles, _largest_cone, aligned_features
+from houghcad.families import REGISTRY
 from houghcad.families import select as select_families
 from houghcad.evaluate import classification_measures
 
@@ -183,8 +184,7 @@ def test_a_bore_beside_a_chamfered_edge_is_found_though_the_chamfer_fits_no_feat
 def test_a_row_between_two_faces_takes_the_feature_their_boundary_rows_lie_on():
     # A free row at radius 10 lies on its level and on the cylinder about the discs' normal alike;
     # the discs' edge rows beside it decide: on the cylinder for a rim, on the level for a flat land.
-    from _helpers import plane_candidate, rim_rows
-    from houghcad.aligned import aligned_features
+    from _helpers import rim_rows
     from houghcad.state import Segmentation
 
     for flat_land, kept in ((False, "cylinder"), (True, "plane")):
@@ -194,3 +194,29 @@ def test_a_row_between_two_faces_takes_the_feature_their_boundary_rows_lie_on():
         got = aligned_features(row, select_families("simple"), seg, replace(ctx, local=True))
         assert [c.family.name for c in got] == [kept], flat_land
         assert len(got[0].indices) == len(row)
+
+
+def test_a_chamfers_middle_rows_take_the_plane_through_its_neighbours_edge_rows():
+    # A 45° chamfer four rows wide between the faces x = 0 (z ≤ 0) and z = 1.5 (x ≥ 1.5), its edge
+    # rows held by those faces: each level across a face's normal holds one of its two middle
+    # rows, and the chamfer's plane, which holds the edge rows on both sides, holds both.
+    from houghcad.state import Segmentation
+
+    y = np.arange(0.0, 20.01, 0.5)
+    rows = lambda x, z: np.c_[np.full(len(y), x), y, np.full(len(y), z)]  # noqa: E731
+    middle = np.r_[rows(0.5, 0.5), rows(1.0, 1.0)]
+    a = np.concatenate([rows(0.0, -z) for z in np.arange(0.0, 5.01, 0.5)])
+    b = np.concatenate([rows(x, 1.5) for x in np.arange(1.5, 6.51, 0.5)])
+    pts = np.r_[middle, a, b]
+    ends = np.cumsum([0, len(middle), len(a), len(b)])
+    ctx = context(pts)
+    ia, ib = np.arange(ends[1], ends[2]), np.arange(ends[2], ends[3])
+    seg = Segmentation.of(len(pts), [plane_candidate(ctx, ia), plane_candidate(ctx, ib)])
+    got = aligned_features(np.arange(ends[1]), select_families("simple"), seg, replace(ctx, local=True))
+    assert [c.family.name for c in got] == ["plane"] and len(got[0].indices) == len(middle)
+    n = got[0].prim.params["normal"]
+    want = ctx.pre.transform.dirs(np.array([[1.0, 0.0, -1.0]]) / np.sqrt(2))[0]
+    assert abs(abs(n @ want) - 1) < 1e-9
+    # The plane passes through the edge rows: they are its boundary curves.
+    edges = np.r_[ia[:len(y)], ib[:len(y)]]
+    assert REGISTRY["plane"].distance(got[0].prim, ctx.pre.points[edges]).max() < 1e-9

@@ -18,7 +18,8 @@ import numpy as np
 from .adjacency import border_points, row_support
 from .context import Context
 from .families import Family
-from .families.base import Primitive, axial
+from .bridges import row_axis
+from .families.base import Primitive, axial, unit
 from .preprocess import rotation_to_z
 from .recognize import dense_subsets, select
 from .state import Candidate, Segmentation, mean_fitting_error
@@ -33,7 +34,9 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
     the ones before it left (at most ``aligned_pieces``); their pieces are dense subsets of at
     least ``ctx.min_points`` and together hold ``aligned_cover`` of the cluster, or leave fewer
     than ``ctx.min_points`` of it; short of that, only the cylinders exact over more than one
-    ring of points stay (:func:`_exact_over_rings`)."""
+    ring of points stay (:func:`_exact_over_rings`). A cluster that is a straight row takes
+    instead the plane its neighbours' boundary rows choose (:func:`_row_plane`) when that
+    explains it in larger pieces than they do."""
     fams = {f.name: f for f in families}
     cyl, plane = fams.get("cylinder"), fams.get("plane")
     # On a noisy cloud one cylinder of all the points is fitted (see one_aligned_cylinder): a
@@ -74,7 +77,59 @@ def aligned_features(cl: np.ndarray, families: list[Family], seg: Segmentation, 
     left = len(cl) - sum(len(c.indices) for c in out)
     if out and left > (1.0 - t.aligned_cover) * len(cl) and left >= ctx.min_points:
         out = [e for e in (_exact_over_rings(c, ctx) for c in out) if e is not None]
-    return select(out, seg.free, ctx) if out else []
+    out = select(out, seg.free, ctx) if out else []
+    # A straight row's plane explains it in a larger piece than the levels do (two middle rows of
+    # a chamfer four rows wide, each level holding one; the splitting phase's measure, the sum
+    # of squared sizes): taken instead. On a tie the features stay: a short row of a narrow cone
+    # or cylinder band is nearly straight, and a plane through it holds a few points of the edge
+    # rows on both sides as well.
+    row = _row_plane(cl, border, plane, ctx) if plane is not None else None
+    if row is not None and len(row.indices) ** 2 > sum(len(c.indices) ** 2 for c in out):
+        return select([row], seg.free, ctx)
+    return out
+
+
+def _row_plane(cl: np.ndarray, border: np.ndarray, plane: Family, ctx: Context) -> Candidate | None:
+    """The plane through the cluster ``cl`` (global indices) when it is a straight row of points,
+    chosen by the boundary points ``border`` of the faces beside it; None when it is no row or no
+    such plane holds boundary points on both of its sides.
+
+    A chamfer two or three rows wide keeps only its middle row once its edge rows went to the
+    faces beside it, and lies across neither face's normal: no level finds it, and every plane
+    through the row fits the row. Seen along the row, the row is one point and each row of the
+    neighbours' boundary points one more: the chamfer's plane is the line through the row that
+    holds an edge row on either side of it (:func:`houghcad.adjacency.row_support`)."""
+    P = ctx.pre.points
+    X = P[cl]
+    a = row_axis(X, ctx.link)
+    if a is None or len(border) < 2:
+        return None
+    c0 = X.mean(axis=0)
+    e1 = unit(np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0]))
+    e2 = np.cross(a, e1)
+    u, v = (P[border] - c0) @ e1, (P[border] - c0) @ e2
+    # One candidate line per boundary point (angle modulo π); each holds the points within τ.
+    phi = np.mod(np.arctan2(v, u), np.pi)
+    cs, sn = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    on = np.abs(cs * v - sn * u) <= ctx.tau
+    along = cs * u + sn * v
+    sides = np.minimum((on & (along > 0)).sum(axis=1), (on & (along < 0)).sum(axis=1))
+    best = int(np.argmax(sides * (len(border) + 1) + on.sum(axis=1)))
+    if sides[best] < 1:
+        return None
+    normal = -np.sin(phi[best]) * e1 + np.cos(phi[best]) * e2
+    if np.abs((X - c0) @ normal).max() > ctx.tau:
+        return None
+    prim = Primitive("plane", {"normal": normal, "offset": float(normal @ c0)})
+    ext = np.concatenate([cl, border[on[best]]])
+    fit = plane.fit(prim, P[ext], ctx.pre.normals[ext])
+    if fit is not None and plane.valid(fit, ctx) and plane.distance(fit, P[ext]).max() <= ctx.tau:
+        prim = fit
+    d = plane.distance(prim, X)
+    keep = d <= ctx.tau
+    if keep.sum() < ctx.min_points:
+        return None
+    return Candidate(plane, prim, cl[keep], mean_fitting_error(d[keep], X[keep]), d[keep])
 
 
 def _exact_over_rings(c: Candidate, ctx: Context) -> Candidate | None:
