@@ -98,7 +98,8 @@ def _row_plane(cl: np.ndarray, border: np.ndarray, plane: Family, ctx: Context) 
     faces beside it, and lies across neither face's normal: no level finds it, and every plane
     through the row fits the row. Seen along the row, the row is one point and each row of the
     neighbours' boundary points one more: the chamfer's plane is the line through the row that
-    holds an edge row on either side of it (:func:`houghcad.adjacency.row_support`)."""
+    holds an edge row on either side of it (its points within τ, as
+    :func:`houghcad.adjacency.row_support` counts them)."""
     P = ctx.pre.points
     X = P[cl]
     a = row_axis(X, ctx.link)

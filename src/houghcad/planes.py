@@ -58,7 +58,7 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
             if prim is not None:
                 d_pl = np.minimum(plane.distance(prim, Q), ctx.tau)
                 if d_pl.mean() <= d_own.mean() + max(t.plane_se * d_own.std() / np.sqrt(len(Q)), exact) \
-                        and not _rows_curve(s, prim, d_own, plane, seg, k, ctx):
+                        and not _rows_curve(s, prim, d_own, plane, seg, ctx):
                     seg.set_record(k, SegmentRecord(plane, prim))
                     changed += 1
                     continue
@@ -67,9 +67,9 @@ def prefer_planes(seg: Segmentation, families: list[Family], ctx: Context) -> in
     return changed + split_into_facets(seg, loose, plane, ctx)
 
 
-def _rows_curve(s: SegmentView, prim: Primitive, d_own: np.ndarray, plane: Family, seg: Segmentation, k: int,
+def _rows_curve(s: SegmentView, prim: Primitive, d_own: np.ndarray, plane: Family, seg: Segmentation,
                 ctx: Context) -> bool:
-    """Whether the curved segment ``s`` (id ``k``; its points at distances ``d_own`` from its
+    """Whether the curved segment ``s`` of ``seg`` (its points at distances ``d_own`` from its
     surface), which the plane ``prim`` fits as well, keeps its curve: it fits its points to the
     rounding of an exact fit, and the neighbouring faces' boundary rows beside it lie on the curve
     more than on the plane (a band whose edge rows went to its neighbours: its middle row lies on
