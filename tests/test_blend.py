@@ -83,6 +83,22 @@ def test_fit_fillet_finds_a_fillet_of_six_sigma(seed):
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fit_fillet_reaches_a_fillet_wider_than_half_its_narrow_face(seed):
+    # A rim rounded on both edges: the flat between the fillets (0.6 r here) is narrower than
+    # either fillet, so half the rim's extent stops short of the tangent point at r. The
+    # radius found at the band's end sends the fit to the rim's far end.
+    A, B = _corner_points(6.0, 0.2, seed)
+    B = B[B[:, 1] <= 6.0 + 3.6]
+    fit = fit_fillet(A, B, L0, 0.2, r_cap=30.0)
+    assert fit.radius == pytest.approx(6.0, rel=0.05)
+    assert fit.r_max > 6.0 and fit.lr > LR_MIN
+    # A sharp corner beside the same narrow face stays sharp, whichever band is tried.
+    A, B = _corner_points(0.0, 0.2, seed)
+    fit = fit_fillet(A, B[B[:, 1] <= 3.6], L0, 0.2, r_cap=30.0)
+    assert fit.lr < LR_MIN
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
 def test_fit_fillet_leaves_a_sharp_corner_sharp(seed):
     A, B = _corner_points(0.0, 1.0, seed)
     fit = fit_fillet(A, B, L0, 1.0, r_cap=30.0)

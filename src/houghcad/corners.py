@@ -202,6 +202,7 @@ class FilletFit:
     band: np.ndarray
     lines: np.ndarray
     taken: np.ndarray
+    r_max: float = float("inf")  # the largest radius tried
 
 
 def fit_fillet(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, sigma: float, r_cap: float,
@@ -230,9 +231,30 @@ def fit_fillet(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, sigma: float, r_ca
     if not t.corner_min_deg < ang < t.corner_max_deg:
         return None
     half = np.radians(ang) / 2
-    ext = [np.quantile((X - C) @ rays[k], t.extent_quantile) for k, X in enumerate((XA, XB))]
-    W = min(min(ext) * t.band_share, r_cap / np.tan(half))  # band along each ray
+    ext = min(np.quantile((X - C) @ rays[k], t.extent_quantile) for k, X in enumerate((XA, XB)))
+    cap = r_cap / np.tan(half)  # band along each ray
+    W = min(ext * t.band_share, cap)
     L = _refit_lines(XA, XB, L, C, rays, W, sigma, t)
+    fit = _fit_in_band(XA, XB, L, rays, half, W, sigma, XS, dS, gS, t)
+    # Extension: the radii tried end where the band does. A best radius at that end (or a band
+    # holding too few of the faces' points) is bounded by the band, not by the points: a rim
+    # rounded on both edges, its flat narrower than its fillets, leaves less than half its extent
+    # to either fillet. The band then reaches the narrower face's far end (its line stays as
+    # refitted beyond the first band: few points lie beyond the second), and the better fit of
+    # the two is kept.
+    bounded = fit is None or fit.radius >= fit.r_max * (1 - 1 / t.radii)
+    if bounded and W < min(ext, cap):
+        wide = _fit_in_band(XA, XB, L, rays, half, min(ext, cap), sigma, XS, dS, gS, t)
+        if wide is not None and (fit is None or wide.lr > fit.lr):
+            fit = wide
+    return fit
+
+
+def _fit_in_band(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, rays: np.ndarray, half: float, W: float,
+                 sigma: float, XS: np.ndarray | None, dS: np.ndarray | None, gS: np.ndarray | None,
+                 t: FilletTolerances) -> FilletFit | None:
+    """:func:`fit_fillet` on the lines L (2, 3) with ``rays`` (2, 2) along them, within the band of
+    width ``W`` along each ray from their corner (``half``: half the corner's angle, radians)."""
     n = L[:, :2]
     if abs(np.linalg.det(n)) < np.sin(np.radians(t.parallel_deg)):
         return None
@@ -263,7 +285,7 @@ def fit_fillet(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, sigma: float, r_ca
             null += float(np.sum(dS0 ** 2))
     r, sse = _best_radius(Xb, C, rays, n, r_max, t)
     lr = (null - sse) / max(sigma, _TINY) ** 2
-    return FilletFit(r, lr, C, rays, band, L, taken)
+    return FilletFit(r, lr, C, rays, band, L, taken, r_max)
 
 
 def _refit_lines(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, C: np.ndarray, rays: np.ndarray, W: float,

@@ -248,7 +248,8 @@ class FilletTolerances:
     coaxial_taus: float = tol(2.0, "τ", "axis lines this close are one ...")
     coaxial_diagonals: float = tol(0.01, "diagonals", "... or this close")
     extent_quantile: float = tol(0.9, "quantile", "a face's extent along its ray, robust to strays")
-    band_share: float = tol(0.5, "share of the shorter extent", "the corner's band along each ray")
+    band_share: float = tol(0.5, "share of the shorter extent", "the corner's band along each ray; a radius "
+                              "at its end (the band bounds it) is sought again to the shorter face's far end")
     band_before_sigmas: float = tol(3.0, "σ", "points this far before the corner still belong to its band")
     band_min_points: int = tol(10, "points", "a band needs points to fit a radius")
     trim_sigmas: float = tol(2.5, "σ", "the neighbours' lines refitted on their points within this")
