@@ -193,6 +193,8 @@ class FilletFit:
         The two lines refitted beyond the band.
     taken : ndarray of int
         Labels of the other segments judged with the corner.
+    r_max : float
+        The largest radius tried: what the corner's band holds.
     """
 
     radius: float
@@ -202,7 +204,7 @@ class FilletFit:
     band: np.ndarray
     lines: np.ndarray
     taken: np.ndarray
-    r_max: float = float("inf")  # the largest radius tried
+    r_max: float
 
 
 def fit_fillet(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, sigma: float, r_cap: float,
