@@ -234,8 +234,9 @@ def fit_fillet(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, sigma: float, r_ca
         return None
     half = np.radians(ang) / 2
     ext = min(np.quantile((X - C) @ rays[k], t.extent_quantile) for k, X in enumerate((XA, XB)))
-    cap = r_cap / np.tan(half)  # band along each ray
-    W = min(ext * t.band_share, cap)
+    cap = r_cap / np.tan(half)  # the band that holds a fillet of radius r_cap
+    W = min(ext * t.band_share, cap)  # band along each ray
+    far = min(ext, cap)  # the widest band: to the shorter face's far end
     L = _refit_lines(XA, XB, L, C, rays, W, sigma, t)
     fit = _fit_in_band(XA, XB, L, rays, half, W, sigma, XS, dS, gS, t)
     # Extension: the radii tried end where the band does. A best radius at that end (or a band
@@ -245,8 +246,8 @@ def fit_fillet(XA: np.ndarray, XB: np.ndarray, L: np.ndarray, sigma: float, r_ca
     # refitted beyond the first band: few points lie beyond the second), and the better fit of
     # the two is kept.
     bounded = fit is None or fit.radius >= fit.r_max * (1 - 1 / t.radii)
-    if bounded and W < min(ext, cap):
-        wide = _fit_in_band(XA, XB, L, rays, half, min(ext, cap), sigma, XS, dS, gS, t)
+    if bounded and W < far:
+        wide = _fit_in_band(XA, XB, L, rays, half, far, sigma, XS, dS, gS, t)
         if wide is not None and (fit is None or wide.lr > fit.lr):
             fit = wide
     return fit
