@@ -252,3 +252,71 @@ def test_the_axis_votes_neighbour_table_is_built_when_first_read():
     assert other is not table and len(other) == len(idx) - 1
     given = np.zeros((len(idx), 4), int)
     assert neighbour_table(replace(v, neighbors=given)) is given
+
+
+def test_normal_lines_meeting_in_two_places_place_a_torus_at_each():
+    # Two coaxial tubes at heights 0 and 1.5 (a bead and a groove of a turned
+    # part): the least-squares meeting point of all their normal lines lies
+    # between them, on neither tube, and the meridian vote adds both.
+    from houghcad.families.torus import sample_torus, tube_heights
+
+    rng = np.random.default_rng(0)
+    P1, N1 = sample_torus(rng, 1500, 2.0, 0.5)
+    P2, N2 = sample_torus(rng, 1500, 1.2, 0.6)
+    P2[:, 2] += 1.5
+    P, N = np.r_[P1, P2], np.r_[N1, N2]
+    ctx = _context(P)
+    x, nrm = ctx.pre.points, ctx.pre.normals
+    q = ctx.pre.transform.points(np.zeros((1, 3)))[0]  # the first tube's centre
+    axis = ctx.pre.transform.dirs(np.array([[0.0, 0.0, 1.0]]))[0]
+    heights = np.array(tube_heights(x, nrm, q, axis, ctx))
+    s = ctx.pre.transform.scale
+    assert len(heights) >= 2
+    for z in (0.0, 1.5):  # within a cell of the vote (the part's extent / 64)
+        assert np.abs(heights - z * s).min() <= 0.05 * s
+    # One tube alone: its normal lines meet at its centre, the only height tried.
+    one = tube_heights(x[:1500], nrm[:1500], q, axis, ctx)
+    assert len(one) == 1 and abs(one[0]) <= 0.01 * s
+
+
+def test_on_noisy_clouds_a_complex_candidate_explaining_more_at_less_excess_wins():
+    # A sphere through parts of a bead, a groove and a wall holds thousands of
+    # points within ±6 sigma at an error near the noise's; the bead's torus
+    # explains more of them better, but not by the factor a clear win needs.
+    from houghcad.recognize import _better
+
+    cloud = synth.single("plane", 0, n_points=2000)
+    ctx = _context(cloud.points)
+    P = ctx.pre.points
+
+    def cand(name, n, d):
+        d = np.full(n, d)
+        return Candidate(REGISTRY[name], None, np.arange(n), mean_fitting_error(d, P[:n]), d)
+
+    sphere, torus = cand("sphere", 1500, 0.010), cand("torus", 1900, 0.008)
+    t = ctx.tol.recognition
+    assert not _better(torus, sphere, t)
+    assert _better(torus, sphere, t, dominates=True) and not _better(sphere, torus, t, dominates=True)
+    # Fewer points, or no lower error: the simpler family keeps them.
+    assert not _better(cand("torus", 1400, 0.008), sphere, t, dominates=True)
+    assert not _better(cand("torus", 1900, 0.010), sphere, t, dominates=True)
+
+
+def test_the_paper_noise_block_at_sigma_a_tenth_comes_out_as_its_five_primitives():
+    # The paper's Table 5 part at sigma = 0.10 in its units (1.4 % of the diagonal), noise seed 2
+    # (the benchmark's three seeds are in BENCHMARKS.md): a sphere through the bead, the wall and
+    # the groove took the first round before the tube centres were sought where the normal lines
+    # meet and a torus explaining more points at less excess could beat it.
+    cloud = synth.table5_block(seed=2, noise=0.1 / synth.table5_block().diagonal())
+    res = houghcad.segment(cloud.points, seed=0)
+    owner = np.full(len(cloud.points), len(res.segments))
+    for k, s in enumerate(res.segments):
+        owner[s.indices] = k
+    want = {0: ("plane", {}), 1: ("plane", {}), 2: ("cylinder", {"radius": 1.80}),
+            3: ("torus", {"major_radius": 1.49, "minor_radius": 0.72}),
+            4: ("torus", {"major_radius": 1.05, "minor_radius": 0.79})}
+    for prim, (kind, params) in want.items():
+        seg = res.segments[int(np.bincount(owner[cloud.labels == prim]).argmax())]
+        assert seg.type == kind
+        for name, value in params.items():
+            assert seg.params[name] == pytest.approx(value, abs=0.05)

@@ -83,6 +83,16 @@ class NoisePolicy:
         levels: a band ±τ (3 σ) holds most of a small noisy cluster whatever
         its shape, so the best of many draws is a chance fit (a generalised
         cone's pieces came out as planes and cylinders of a dozen points).
+    complex_dominates : bool
+        Selection: a more complex family's candidate that explains more
+        points than a simpler one's, at a lower error in excess of the
+        noise and a mean distance lower by ``recognition.dominance_se``
+        standard errors, wins (the simpler one does nothing better). Within a band of
+        ±6 σ a sphere through a bead, a groove and a wall holds thousands
+        of points at an error near the noise's own, and against the rule of
+        clear wins a torus explaining more of them lost to it. On exact
+        samples the true face fits exactly, and no larger candidate fits
+        better.
     larger_segments : bool
         The smallest segment is ``scale.noisy_min_points_floor`` points, not
         ``scale.min_points_floor``: a handful of noisy points fits some
@@ -110,6 +120,7 @@ class NoisePolicy:
     nearest_edges: bool
     torus_grid_from_points: bool
     one_aligned_cylinder: bool
+    complex_dominates: bool
     larger_segments: bool
     absorb_inwards: bool
 
@@ -118,8 +129,8 @@ class NoisePolicy:
         return self.name == "noisy"
 
 
-CLEAN = NoisePolicy("clean", *([False] * 15))
-NOISY = NoisePolicy("noisy", *([True] * 15))
+CLEAN = NoisePolicy("clean", *([False] * 16))
+NOISY = NoisePolicy("noisy", *([True] * 16))
 
 
 def choose(noise: str, sigma: float, spacing: float) -> NoisePolicy:

@@ -377,7 +377,7 @@ def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Cand
                 group.append(j)
         best = group[0]
         for j in group[1:]:
-            if _better(judged[j], judged[best], ctx.tol.recognition):
+            if _better(judged[j], judged[best], ctx.tol.recognition, ctx.policy.complex_dominates):
                 best = j
         # Only the candidates that mostly overlap the winner are settled; a
         # larger one that merely contains it stays in the running.
@@ -427,8 +427,10 @@ def _noise_floored(cands: list[Candidate], ctx: Context) -> list[Candidate]:
     return out
 
 
-def _better(a: Candidate, b: Candidate, t: RecognitionTolerances) -> bool:
-    """Whether candidate a should replace b for the same points."""
+def _better(a: Candidate, b: Candidate, t: RecognitionTolerances, dominates: bool = False) -> bool:
+    """Whether candidate a should replace b for the same points; with ``dominates``, a more
+    complex candidate explaining more points at a lower error also wins
+    (:attr:`houghcad.noise.NoisePolicy.complex_dominates`)."""
     ca, cb = a.family.precedence, b.family.precedence
     if ca == cb and not (a.family.role == b.family.role == "simple"):
         # Two complex candidates (several profiles, placements): a small piece
@@ -440,11 +442,22 @@ def _better(a: Candidate, b: Candidate, t: RecognitionTolerances) -> bool:
     if ca == cb:
         return (a.mfe, -len(a.indices)) < (b.mfe, -len(b.indices))
     simple, cplx = (a, b) if ca < cb else (b, a)
+    if dominates and len(cplx.indices) > len(simple.indices) and cplx.mfe < simple.mfe \
+            and _clearly_closer(cplx, simple, t.dominance_se):
+        return a is cplx
     # The more complex family wins with a clearly lower error, or when it
     # explains many more points about as well.
     cplx_wins = (cplx.mfe < t.complex_wins_mfe * simple.mfe and simple.mfe - cplx.mfe > t.complex_wins_abs) or (
         len(cplx.indices) >= t.covers_size * len(simple.indices) and cplx.mfe <= t.covers_mfe * simple.mfe)
     return (a is cplx) == cplx_wins
+
+
+def _clearly_closer(a: Candidate, b: Candidate, z: float) -> bool:
+    """Whether a's points lie nearer its surface than b's do to b's by more than ``z`` standard
+    errors of the difference of the two mean distances. A family that nests another (a cone
+    about a cylinder's points) always fits a little closer, by its extra freedom alone."""
+    da, db = a.distances, b.distances
+    return float(db.mean() - da.mean()) > z * float(np.sqrt(da.var() / len(da) + db.var() / len(db)))
 
 
 def recognize(idx: np.ndarray, families: list[Family], ctx: Context, avail: np.ndarray) -> list[Candidate]:

@@ -114,7 +114,15 @@ class RecognitionTolerances:
     noise_floor_se: float = tol(1.5, "standard errors", "an excess below two standard errors of the mean |d| "
                                 "(0.755 m / √n) is the floor itself")
     noise_floor_least: float = tol(0.05, "share of the floor", "the least excess selection resolves")
+    dominance_se: float = tol(2.0, "standard errors", "noisy clouds: a more complex candidate explaining more "
+                              "points wins when its mean distance is lower by this many standard errors of the "
+                              "difference, more than a nesting family's extra freedom gives")
     neighbours: int = tol(10, "neighbours", "neighbour table handed to the families' placements")
+    tube_centre_share: float = tol(0.5, "share of the normal lines", "a torus placement's tube centre, where the "
+                                   "normal lines meet in the meridian plane, that fewer lines pass near is no "
+                                   "meeting point: the lines of several tubes (or none) meet at their average")
+    tube_centres: int = tol(3, "centres", "tube centres tried per torus placement when the lines meet in several "
+                            "places: each costs a vote over (R, r)")
 
 
 @dataclass(frozen=True)
