@@ -123,6 +123,15 @@ class RecognitionTolerances:
                                    "meeting point: the lines of several tubes (or none) meet at their average")
     tube_centres: int = tol(3, "centres", "tube centres tried per torus placement when the lines meet in several "
                             "places: each costs a vote over (R, r)")
+    meridian_bins: int = tol(64, "bins", "cells across the meridian plane's larger side in the vote of the normal "
+                             "lines for tube centres (at least τ wide)")
+    meet_cells: float = tol(2.0, "meridian cells", "a normal line this near a point or the axis meets it: at σ = "
+                            "1.4 % of the diagonal 71 % of a turned part's lines pass within two cells of its axis, "
+                            "46 % within one")
+    axis_cells: int = tol(3, "meridian cells", "normal lines meeting this near the axis meet at a sphere's centre "
+                          "or a cone's apex, not a tube's")
+    parallel_deg: float = tol(10.0, "degrees", "a normal line this close to the axis's direction is parallel to it "
+                              "(a disc about the axis)")
 
 
 @dataclass(frozen=True)

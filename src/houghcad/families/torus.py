@@ -51,16 +51,6 @@ def meridian_centre(rho: np.ndarray, h: np.ndarray, n_rho: np.ndarray, n_h: np.n
 MERIDIAN_SPREAD = 0.01
 #: Most bins per axis of the torus accumulator.
 MAX_BINS = 200
-#: Bins across the meridian plane's larger side in the vote of the normal lines (at least τ wide).
-MERIDIAN_BINS = 64
-#: Meridian cells from the axis within which a meeting point of the normal lines is no tube centre.
-AXIS_CELLS = 3
-#: Meridian cells within which a normal line meets a point or the axis (noisy normals miss by more
-#: than one: at σ = 1.4 % of the diagonal 71 % of a turned part's lines pass within two cells of its
-#: axis, 46 % within one).
-MEET_CELLS = 2
-#: Normal lines within this angle (degrees) of the axis are parallel to it (a disc about it).
-PARALLEL_DEG = 10.0
 
 
 def tube_heights(P: np.ndarray, N: np.ndarray, q: np.ndarray, a: np.ndarray, ctx) -> list[float]:
@@ -82,13 +72,13 @@ def tube_heights(P: np.ndarray, N: np.ndarray, q: np.ndarray, a: np.ndarray, ctx
     heights = [0.0 if centre is None else centre[1]]
     if ctx.local:
         return heights
+    t = ctx.tol.recognition
     lo = np.array([0.0, h.min() - ctx.tau])
     ext = np.array([rho.max() + ctx.tau, h.max() + ctx.tau]) - lo
-    cell = max(float(ext.max()) / MERIDIAN_BINS, ctx.tau)
+    cell = max(float(ext.max()) / t.meridian_bins, ctx.tau)
     D = np.stack([n_rho, n_h], axis=1)
     D /= np.maximum(np.linalg.norm(D, axis=1, keepdims=True), 1e-12)
-    t = ctx.tol.recognition
-    reach = MEET_CELLS * cell
+    reach = t.meet_cells * cell
     if centre is not None:
         off = np.abs(D[:, 0] * (centre[1] - h) - D[:, 1] * (centre[0] - rho))  # each line's distance to it
         if np.mean(off <= reach) >= t.tube_centre_share:
@@ -98,7 +88,7 @@ def tube_heights(P: np.ndarray, N: np.ndarray, q: np.ndarray, a: np.ndarray, ctx
     # point on it, is an average of unrelated surfaces.
     cross = np.cross(N, a)
     sin = np.linalg.norm(cross, axis=1)
-    slanted = sin >= np.sin(np.radians(PARALLEL_DEG))
+    slanted = sin >= np.sin(np.radians(t.parallel_deg))
     miss = np.abs(np.einsum("ij,ij->i", P[slanted] - q, cross[slanted])) / sin[slanted]
     if not slanted.any() or np.mean(miss <= reach) < t.tube_centre_share:
         return heights
@@ -108,7 +98,7 @@ def tube_heights(P: np.ndarray, N: np.ndarray, q: np.ndarray, a: np.ndarray, ctx
     for k in pk[H.ravel()[pk] >= ctx.min_votes]:
         # Lines meeting on or beside the axis meet at a sphere's centre or near a cone's apex,
         # which those families vote on their own; a torus there is a sphere with a spindle.
-        if k // bins[1] < AXIS_CELLS:
+        if k // bins[1] < t.axis_cells:
             continue
         z = lo[1] + (k % bins[1] + 0.5) * cell
         if all(abs(z - y) > cell for y in heights):
