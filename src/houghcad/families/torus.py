@@ -85,12 +85,13 @@ def tube_heights(P: np.ndarray, N: np.ndarray, q: np.ndarray, a: np.ndarray, ctx
             return heights
     # Other centres are sought on a turned part only, where most of the normal lines that are
     # not parallel to the axis (a disc's are) meet it; elsewhere the axis, and any meeting
-    # point on it, is an average of unrelated surfaces.
+    # point on it, is an average of unrelated surfaces, and lines too noisy to meet their axis
+    # meet each other at random.
     cross = np.cross(N, a)
     sin = np.linalg.norm(cross, axis=1)
     slanted = sin >= np.sin(np.radians(t.parallel_deg))
     miss = np.abs(np.einsum("ij,ij->i", P[slanted] - q, cross[slanted])) / sin[slanted]
-    if not slanted.any() or np.mean(miss <= reach) < t.tube_centre_share:
+    if not slanted.any() or np.mean(miss <= reach) < t.turned_share:
         return heights
     bins = np.maximum(np.ceil(ext / cell).astype(np.int64), 1)
     H = smooth(_line_votes(rho, h, D[:, 0], D[:, 1], lo[0], lo[1], cell, int(bins[0]), int(bins[1])))
