@@ -356,6 +356,16 @@ def test_plate_thinner_than_the_spacing_is_not_taken_for_noise(seed):
     assert pre.normals_method == "pca"
 
 
+@pytest.mark.parametrize("name", ["block_with_hole_and_slot", "filleted_block", "bracket"])
+def test_exact_samples_are_told_from_noise_of_a_twentieth_of_a_spacing(name):
+    # Sampled CAD models lie on their faces to rounding, and their noise estimate reads the
+    # curvature and thin features; noise of 0.05-0.07 spacings already lifts the quadruples'
+    # residuals off rounding.
+    n = 4000 if name == "bracket" else 12000
+    assert preprocess(synth.PARTS[name](seed=0, n_points=n, noise=0.0).points).exact
+    assert not preprocess(synth.PARTS[name](seed=0, n_points=n, noise=0.0003).points).exact
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_low_noise_on_small_faces_is_read_near_its_value(seed):
     # The bracket's narrow faces put two surfaces in 8 and 16 neighbours: at σ = 0.08 spacings

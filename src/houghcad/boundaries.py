@@ -10,6 +10,9 @@ from scipy.spatial import cKDTree
 from .context import Context, threads
 from .state import Segmentation, surface_distance
 
+#: Median distance of Gaussian-noisy points (σ = 1) to their exact surface: the median of |N(0, 1)|.
+HALF_NORMAL_MEDIAN = 0.6745
+
 
 def _neighbour_owners(owner: np.ndarray, pts: np.ndarray, ctx: Context, reach: float,
                       k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -49,8 +52,9 @@ def settle_edges(seg: Segmentation, ctx: Context, delta: float, reach: float) ->
 
     A point lies on a surface within ``delta`` of it (standard units) and
     within an allowance of the nearest one: ``settle_slack`` τ, or
-    ``settle_fits`` times the segment's median distance to its surface,
-    since a small face's fit leaves its boundary rows that far off it. A
+    ``settle_fits`` times the segment's median distance to its surface in
+    excess of the noise's own, since a small face's fit leaves its boundary
+    rows that far off it. A
     face that continues another tangentially (a plane beyond a fillet)
     passes within τ of the other's rows beside the tangent line, as the
     square of the distance from it, and a small surface crossing a face at
@@ -95,7 +99,12 @@ def _settle_round(seg: Segmentation, ctx: Context, delta: float, nb: np.ndarray,
     ok = d < delta
     np.minimum.at(nearest, pairs[ok, 1], d[ok])
     t = ctx.tol.boundaries
-    allow = np.maximum(t.settle_slack * ctx.tau, t.settle_fits * fit)
+    # A fit is only as sure as its error, which its median distance measures on exact samples;
+    # noise adds its own median distance, HALF_NORMAL_MEDIAN σ, which no fit removes. Left in, it
+    # makes every point within a few σ of an adjacent surface lie "on" it, and the band beside each
+    # edge goes to the narrower face. (On exact samples the noise estimate reads curvature.)
+    scatter = 0.0 if ctx.pre.exact else HALF_NORMAL_MEDIAN * ctx.pre.noise
+    allow = np.maximum(t.settle_slack * ctx.tau, t.settle_fits * np.maximum(fit - scatter, 0.0))
     on = ok & (d <= nearest[pairs[:, 1]] + allow[pairs[:, 0]])
     if not on.any():
         return False

@@ -114,6 +114,10 @@ class Preprocessed:
     crease : ndarray of bool, shape (n,), or None
         Points of a clean cloud on a crease (no local quadric fits them), whose normals were
         voted: there the normal may be a neighbouring face's. None when no point was voted.
+    exact : bool
+        The points lie on their surfaces to rounding (a quarter or more of the quadruples of a
+        point and its 3 nearest neighbours are coplanar to 0.002 spacings, which noise does not
+        give): ``noise`` then reads curvature and thin features, not a scatter of the points.
     """
 
     points: np.ndarray
@@ -126,6 +130,7 @@ class Preprocessed:
     normals_method: str
     reach: float = 0.0
     crease: np.ndarray | None = None
+    exact: bool = False
     #: Neighbour tables read so far, by (k, radius) (see :meth:`neighbours_within`); not
     #: carried over by ``dataclasses.replace``, which may change the points.
     _tables: dict = field(default_factory=dict, init=False, repr=False, compare=False)
@@ -168,6 +173,9 @@ WIDE_NORMALS_MAX = 64
 #: and the bound's factor: the quantile is 1 / 16 of σ under Gaussian noise up to 0.3 spacings.
 QUADRUPLE_QUANTILE = 0.1
 QUADRUPLE_SIGMAS = 16.0
+#: Exact samples: a quarter or more of the 4-point plane residuals under this many spacings
+#: (rounding; under noise the 25th percentile is above 0.01 spacings from σ = 0.07 spacings on).
+EXACT_QUADRUPLE_SPACINGS = 0.002
 
 
 def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: str = "auto",
@@ -214,7 +222,8 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     T = Similarity(center=center, R=R, scale=scale0 * s2)
     diag = float(np.linalg.norm(np.ptp(x, axis=0)))
     return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
-                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2, crease=crease)
+                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2, crease=crease,
+                        exact=hood.exact)
 
 
 def _unit_cube(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
@@ -262,6 +271,8 @@ class _Neighbourhoods:
         Median nearest-neighbour distance.
     qres : ndarray, shape (n,), or None
         Quadric residuals (:func:`quadric_residuals`), computed when k > 8.
+    exact : bool
+        The samples lie on their surfaces to rounding (:attr:`Preprocessed.exact`).
     """
 
     tree: cKDTree
@@ -272,6 +283,7 @@ class _Neighbourhoods:
     noise: float
     spacing: float
     qres: np.ndarray | None
+    exact: bool = False
 
 
 def _neighbourhoods(x: np.ndarray, k: int, workers: int = 1) -> _Neighbourhoods:
@@ -281,21 +293,22 @@ def _neighbourhoods(x: np.ndarray, k: int, workers: int = 1) -> _Neighbourhoods:
     dist, nbr = tree.query(x, k=k, workers=workers)
     nrm, ev = pca_normals(x, nbr, workers)
     spacing = float(np.median(dist[:, 1]))
-    noise, qres = _noise_estimate(x, nbr, ev, k, spacing, workers)
+    noise, qres, exact = _noise_estimate(x, nbr, ev, k, spacing, workers)
     return _Neighbourhoods(tree=tree, k=k, dist=dist, nbr=nbr, normals=nrm, noise=noise, spacing=spacing,
-                           qres=qres)
+                           qres=qres, exact=exact)
 
 
 def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
-                    spacing: float, workers: int = 1) -> tuple[float, np.ndarray | None]:
-    """Robust noise σ of a cloud (its units) and the quadric residuals (n,) when k > 8, else None.
+                    spacing: float, workers: int = 1) -> tuple[float, np.ndarray | None, bool]:
+    """Robust noise σ of a cloud (its units), the quadric residuals (n,) when k > 8 (else None), and
+    whether the samples are exact (:attr:`Preprocessed.exact`; tested when k > 4).
 
     ``nbr`` (n, k) are the neighbourhoods, ``ev`` (n, 3) their covariance eigenvalues (ascending)
     and ``spacing`` the median nearest-neighbour distance. The k-neighbour PCA residual is bounded
     by smaller-neighbourhood estimates that sharp or thin clean features do not inflate.
     """
     noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
-    qres = None
+    qres, exact = None, False
     if k > 8:
         # Thin walls and tight curvature inflate the 16-neighbour residual of
         # clean CAD samples (both faces of a plate in one neighbourhood); the
@@ -321,7 +334,8 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
         # residual, about a third of sigma, bounds the noise.
         r4 = np.sqrt(np.maximum(pca_normals(x, nbr[:, :4], workers)[1][:, 0], 0))
         q_low, q25, q50 = np.quantile(r4, [QUADRUPLE_QUANTILE, 0.25, 0.5])
-        if q25 < 0.002 * spacing:
+        exact = bool(q25 < EXACT_QUADRUPLE_SPACINGS * spacing)
+        if exact:
             noise = min(noise, 3.0 * float(q50))
         # Whether the cloud is noisy at all: on sparse samples the two faces
         # of a plate thinner than the spacing interleave, and so do the rows
@@ -335,7 +349,7 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
         bound = QUADRUPLE_SIGMAS * float(q_low)
         if bound < NOISY_SPACINGS * spacing <= noise:
             noise = bound
-    return noise, qres
+    return noise, qres, exact
 
 
 def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | None, method: str, seed: int,
