@@ -44,7 +44,7 @@ def build_segments(seg: Segmentation, groups: list[RawGroup], pre: Preprocessed,
         P, N = pre.points[idx], pre.normals[idx]
         sel = np.arange(len(P)) if len(P) <= MAX_REFIT_POINTS else \
             np.sort(rng.choice(len(P), MAX_REFIT_POINTS, replace=False))
-        prim = None if fixed else fam.fit(prim0, P[sel], N[sel])
+        prim = None if fixed else fam.final_fit(prim0, P[sel], N[sel])
         if prim is None or not fam.valid(prim, check):
             prim = prim0
         d = fam.distance(prim, P) / T.scale

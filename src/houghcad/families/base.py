@@ -231,6 +231,11 @@ class Family:
         """Least-squares refinement on inliers; None when degenerate."""
         return prim
 
+    def final_fit(self, prim: Primitive, P: np.ndarray, N: np.ndarray) -> Primitive | None:
+        """The fit whose parameters a segment reports (the output's refit on its own points): the
+        least-squares :meth:`fit` unless a family's least squares is biased under noise."""
+        return self.fit(prim, P, N)
+
     def well_determined(self, prim: Primitive, P: np.ndarray, ctx) -> bool:
         """Whether a segment (points P) pins the primitive down well enough to
         be accepted in the global round, before other families compete."""

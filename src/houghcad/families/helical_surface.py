@@ -26,6 +26,7 @@ from ..hough import Grid
 from .base import Frame, Family, Primitive, axis_from_normal_lines, register, tangent_basis, unit
 from ._sampling import ORIGIN, Z_AXIS, Array, Sampler, inverse_cdf, span
 from ._helix import cylindrical, frame_axes, gated_screw_placement
+from ._noisy_profile import ml_radii
 
 TAU = 2.0 * np.pi
 MAX_STARTS = 4
@@ -371,6 +372,23 @@ class HelicalSurface(Family):
         return Primitive(self.name, {"axis_point": q + s * a, "axis": a, "ref_direction": e1n, "R1": float(A - B),
                                      "R2": float(A + B), "n": n, "k1": float(k1),
                                      "k2": float(np.mod(k2 - s, TAU * k1))})
+
+    def final_fit(self, prim, P, N):
+        """:meth:`fit`, then the profile's radii by maximum likelihood under the noise
+        (:func:`~houghcad.families._noisy_profile.ml_radii`): where the root and crest bend within
+        the noise, least squares deepens the profile."""
+        fitted = self.fit(prim, P, N)
+        if fitted is None:
+            return None
+        p = fitted.params
+        k1, n = float(p["k1"]), int(p["n"])
+        rho, phi, z, _ = cylindrical(P, p["axis_point"], p["axis"], p["ref_direction"])
+        sigma0 = float(np.sqrt(np.mean(np.sum(self._foot(fitted, P)[0] ** 2, axis=1))))
+        out = ml_radii(rho, z - p["k2"] - k1 * n * phi, k1 * n, k1, p["R1"], p["R2"], sigma0,
+                       lambda r1, r2, u: _helical_density(r1, r2, k1, n, u))
+        if out is None:
+            return fitted
+        return Primitive(self.name, {**p, "R1": out[0], "R2": out[1]})
 
     def _orthogonal_fit(self, prim: Primitive, P: np.ndarray) -> Primitive | None:
         """Refine the profile (R1, R2, k1, k2) by the signed orthogonal distances of P (m, 3) to
