@@ -148,6 +148,21 @@ def test_final_fit_reads_the_radii_of_a_deep_fine_thread_that_least_squares_deep
     assert ml["k1"] == ls["k1"] and ml["k2"] == ls["k2"] and ml["n"] == ls["n"]
 
 
+def test_final_fit_keeps_least_squares_where_the_segment_is_not_the_thread_it_claims():
+    # A one-start thread fitted as a two-start one of another period: the likelihood's σ is half
+    # the residuals' RMS, and its radii would move the reported error for no truer shape.
+    from houghcad.families.helical_surface import sample_helical_surface
+
+    rng = np.random.default_rng(0)
+    k1 = 0.3 / (2 * np.pi)
+    P, N = sample_helical_surface(rng, 3000, 0.45, 1.0, k1, 1, 4)
+    P = P + rng.normal(0, 0.016, P.shape)
+    wrong = from_world({"axis_point": [0, 0, 0], "axis": [0, 0, 1], "ref_direction": [1, 0, 0], "R1": 0.45,
+                        "R2": 1.0, "n": 2, "k1": 0.65 * k1, "k2": 0.0})
+    ls, final = FAM.fit(wrong, P, N), FAM.final_fit(wrong, P, N)
+    assert all(np.array_equal(final.params[k], ls.params[k]) for k in ls.params)
+
+
 def test_final_fit_is_least_squares_on_exact_samples():
     cloud = synth.single("helical_surface", 1, n_points=2000)
     prim = from_world(cloud.primitives[0]["params"])

@@ -52,6 +52,12 @@ PITCH_SPAN = 4.0
 PITCH_STEPS = (0.04, 0.01)
 #: Points the pitch search sorts per trial pitch (a seeded subsample of larger sets).
 PITCH_POINTS = 1500
+#: The reported radii are the likelihood's while its noise σ and the least-squares residuals' RMS
+#: agree within this factor either way: on a thread they do (1.00-1.01 on the complex benchmark's).
+#: Points that are not the thread the segment claims (a wrong pitch or start count) read 0.45 or
+#: 1.9 times: neither fit's radii mean anything there, and least squares at least keeps the
+#: reported error its smallest.
+ML_SIGMA_RATIO = 1.25
 
 
 def harmonic_phase(rho: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -376,7 +382,8 @@ class HelicalSurface(Family):
     def final_fit(self, prim, P, N):
         """:meth:`fit`, then the profile's radii by maximum likelihood under the noise
         (:func:`~houghcad.families._noisy_profile.ml_radii`): where the root and crest bend within
-        the noise, least squares deepens the profile."""
+        the noise, least squares deepens the profile. Least squares stays when the likelihood's σ
+        and the residuals' RMS disagree (:data:`ML_SIGMA_RATIO`)."""
         fitted = self.fit(prim, P, N)
         if fitted is None:
             return None
@@ -386,7 +393,7 @@ class HelicalSurface(Family):
         sigma0 = float(np.sqrt(np.mean(np.sum(self._foot(fitted, P)[0] ** 2, axis=1))))
         out = ml_radii(rho, z - p["k2"] - k1 * n * phi, k1 * n, k1, p["R1"], p["R2"], sigma0,
                        lambda r1, r2, u: _helical_density(r1, r2, k1, n, u))
-        if out is None:
+        if out is None or not 1.0 / ML_SIGMA_RATIO <= out[2] / sigma0 <= ML_SIGMA_RATIO:
             return fitted
         return Primitive(self.name, {**p, "R1": out[0], "R2": out[1]})
 
