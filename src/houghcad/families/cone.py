@@ -7,12 +7,12 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..hough import Grid
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, planes_intersection, axial, radial,
                    axial_row, register, swept_votes, tangent_basis, turned_axis, unit)
+from . import _lm
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
 
 
@@ -156,15 +156,9 @@ class Cone(Family):
         def unpack(x):
             return p0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5]
 
-        def res(x):
-            return _refit_rows(P, p0, a0, e1, e2, x, False)[0]
-
-        def jac(x):
-            return _refit_rows(P, p0, a0, e1, e2, x, True)[1]
-
         try:
-            x = least_squares(res, np.r_[0, 0, 0, 0, 0, al0], jac=jac, method="lm", max_nfev=40).x
-        except Exception:
+            x = _lm.solve(_refit_rows, np.r_[0, 0, 0, 0, 0, al0], (P, p0, a0, e1, e2), max_nfev=40).x
+        except ValueError:  # fewer points than parameters, or not finite
             return None
         p, a, al = unpack(x)
         if not (0 < al < np.pi / 2):
@@ -185,9 +179,9 @@ class Cone(Family):
         return Frame("point", np.asarray(prim.params["apex"], float), unit(prim.params["axis"]), oriented=True)
 
 
-# The refit's residuals and analytic Jacobian in numba: scipy's Levenberg–Marquardt asks for them
-# 10–40 times a refit, in every cluster's vote, and numpy's per-call overhead on a few hundred
-# points was most of the refit's time. Finite differences would cost six residuals more a step.
+# The refit's residuals and analytic Jacobian in numba: the Levenberg–Marquardt (:mod:`._lm`)
+# asks for them 10–40 times a refit, in every cluster's vote, and numpy's per-call overhead on a
+# few hundred points was most of the refit's time. Finite differences would cost six residuals more a step.
 @numba.njit(cache=True)
 def _refit_rows(P, p0, a0, e1, e2, x, jacobian):
     """Residuals r = ρ cos α − h sin α (n,) of the points P (n, 3) about the cone with apex

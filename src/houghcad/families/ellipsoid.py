@@ -21,7 +21,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from ..hough import Grid
@@ -29,6 +28,7 @@ from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, frame_turn_rows, axial,
                    register, regular_indices, tangent_basis, unit)
 from ._sampling import ORIGIN, TAU, Array, Sampler, span
+from . import _lm
 
 #: Relative spread (max − min) / max of the semi-axes below which the shape is a sphere.
 SPHERE_TOL = 0.05
@@ -394,7 +394,7 @@ class Ellipsoid(Family):
             return np.where(np.isfinite(J), J, 0.0)
 
         try:
-            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=8)
+            sol = _lm.solve(_lm.rows_of(res, jac), x0, max_nfev=8)
         except Exception:
             return None
         c, V, e = unpack(sol.x)

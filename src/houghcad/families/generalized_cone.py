@@ -18,7 +18,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from ..preprocess import rotation_to_z
@@ -27,6 +26,7 @@ from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, directrix_random, di
 from .generalized_cylinder import (B_MAX, B_MIN, N_VALUES, DirectrixPlacement, active_order, best_order, debias_b,
                                    normalise_shape, phase_frame, polar_fit, polar_local,
                                    polar_rows, ref_basis, vote_grid)
+from . import _lm
 
 
 def projected(Pl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -379,7 +379,7 @@ class GeneralizedCone(Family):
 
         x0 = np.array([0, 0, 0, 0, 0, p0["a"], p0["b"], 0.0])
         try:
-            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=80)
+            sol = _lm.solve(_lm.rows_of(res, jac), x0, max_nfev=80)
         except Exception:
             return None
         apex, ax, s, b, phi = unpack(sol.x)

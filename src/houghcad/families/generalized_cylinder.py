@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from ..hough import Grid
@@ -27,6 +26,7 @@ from .base import (Frame, Family, Placement, Primitive, frame_turn_rows, registe
 from ._sampling import (ORIGIN, TAU, Z_AXIS, Array, Sampler, directrix_length, directrix_random, directrix_speed,
                         draw_by_weight, span)
 from .cylinder import axis_candidates
+from . import _lm
 
 #: Orders of the directrix that are swept.
 N_VALUES = tuple(range(2, 13))
@@ -450,7 +450,7 @@ class GeneralizedCylinder(Family):
 
         x0 = np.array([0, 0, 0, 0, p0["a"], p0["b"], 0.0])
         try:
-            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=30)
+            sol = _lm.solve(_lm.rows_of(res, jac), x0, max_nfev=30)
         except Exception:
             return None
         # On its surface the fit settles in a few evaluations; one that runs

@@ -15,10 +15,10 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..hough import Grid
 from .base import Frame, Family, Primitive, axis_from_normal_lines, register, tangent_basis, unit
+from . import _lm
 from ._sampling import ORIGIN, Z_AXIS, Array, Sampler, inverse_cdf, span
 from ._helix import band_edges, cylindrical, frame_axes, gated_screw_placement
 
@@ -211,7 +211,7 @@ class HelicalStrip(Family):
 
         x0 = np.array([0, 0, 0, 0, 0, p0["c"]], float)
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=60)
+            sol = _lm.solve(_lm.forward_difference_rows(res), x0, max_nfev=60)
         except Exception:
             return None
         a, q, c = unpack(sol.x)

@@ -19,7 +19,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from ..hough import Grid
@@ -27,6 +26,7 @@ from .base import Frame, Family, Primitive, axis_from_normal_lines, register, ta
 from ._sampling import ORIGIN, Z_AXIS, Array, Sampler, inverse_cdf, span
 from ._helix import cylindrical, frame_axes, gated_screw_placement
 from ._noisy_profile import ml_radii
+from . import _lm
 
 TAU = 2.0 * np.pi
 MAX_STARTS = 4
@@ -355,7 +355,7 @@ class HelicalSurface(Family):
 
         x0 = np.array([0, 0, 0, 0, 0.5 * (p0["R1"] + p0["R2"]), 0.5 * (p0["R2"] - p0["R1"]), p0["k1"], p0["k2"]])
         try:
-            sol = least_squares(res, x0, method="lm", max_nfev=80)
+            sol = _lm.solve(_lm.forward_difference_rows(res), x0, max_nfev=80)
         except Exception:
             return None
         if not np.isfinite(sol.x).all():
@@ -416,7 +416,7 @@ class HelicalSurface(Family):
         last: dict[bytes, tuple] = {}
 
         def foot(x):
-            # least_squares asks for the residuals and then the Jacobian at the same x: find the
+            # The solver asks for the residuals and then the Jacobian at the same x: find the
             # feet once for both.
             key = np.asarray(x, float).tobytes()
             if key not in last:
@@ -440,7 +440,7 @@ class HelicalSurface(Family):
 
         x0 = np.array([p0["R1"], p0["R2"], p0["k1"], p0["k2"]], float)
         try:
-            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=ORTHOGONAL_EVALUATIONS)
+            sol = _lm.solve(_lm.rows_of(res, jac), x0, max_nfev=ORTHOGONAL_EVALUATIONS)
         except Exception:
             return None
         x = sol.x

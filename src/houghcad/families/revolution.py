@@ -32,7 +32,6 @@ import itertools
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 
 from ..hough import Grid
@@ -44,6 +43,7 @@ from ._meridian import (ACTIVE, PROFILES, Profile, ProfilePlacement, meridian_co
                         register_profile, set_active_profiles, solve_batched, theta_dict)
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 from .ellipsoid import covered_by_simple
+from . import _lm
 
 __all__ = ["ACTIVE", "PROFILES", "Profile", "SurfaceOfRevolution", "meridian_conic_offset", "register_profile",
            "sample_revolution", "set_active_profiles"]
@@ -407,7 +407,7 @@ class SurfaceOfRevolution(Family):
 
         x0 = np.zeros(5 + len(th0))
         try:
-            sol = least_squares(res, x0, jac=jac, method="lm", max_nfev=4 * len(x0))
+            sol = _lm.solve(_lm.rows_of(res, jac), x0, max_nfev=4 * len(x0))
         except Exception:
             return None
         # On its surface the fit settles in a few evaluations per unknown;

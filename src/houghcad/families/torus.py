@@ -7,12 +7,12 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..hough import Grid, persistent_peaks, smooth
 from ..preprocess import rotation_to_z
 from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, axial, radial, register, swept_votes,
                    axial_row, tangent_basis, turned_axis, unit)
+from . import _lm
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 
 
@@ -259,16 +259,10 @@ class Torus(Family):
         def unpack(x):
             return c0 + x[:3], unit(a0 + x[3] * e1 + x[4] * e2), x[5], x[6]
 
-        def res(x):
-            return _refit_rows(P, c0, a0, e1, e2, x, False)[0]
-
-        def jac(x):
-            return _refit_rows(P, c0, a0, e1, e2, x, True)[1]
-
         x0 = np.r_[0, 0, 0, 0, 0, prim.params["major_radius"], prim.params["minor_radius"]]
         try:
-            x = least_squares(res, x0, jac=jac, method="lm", max_nfev=50).x
-        except Exception:
+            x = _lm.solve(_refit_rows, x0, (P, c0, a0, e1, e2), max_nfev=50).x
+        except ValueError:  # fewer points than parameters, or not finite
             return None
         c, a, R, r = unpack(x)
         return Primitive("torus", {"center": c, "axis": a, "major_radius": float(abs(R)),
@@ -290,9 +284,9 @@ class Torus(Family):
         return Frame("point", np.asarray(prim.params["center"], float), unit(prim.params["axis"]))
 
 
-# The refit's residuals and analytic Jacobian in numba, as the cone's (cone._refit_rows): scipy's
-# Levenberg–Marquardt asks for them up to 50 times a refit, and numpy's per-call overhead on a
-# few hundred points was most of the refit's time.
+# The refit's residuals and analytic Jacobian in numba, as the cone's (cone._refit_rows): the
+# Levenberg–Marquardt (:mod:`._lm`) asks for them up to 50 times a refit, and numpy's per-call
+# overhead on a few hundred points was most of the refit's time.
 @numba.njit(cache=True)
 def _refit_rows(P, c0, a0, e1, e2, x, jacobian):
     """Residuals r = D − x6 (n,) of the points P (n, 3) about the torus with centre c0 + x[:3],

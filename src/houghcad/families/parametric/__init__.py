@@ -31,7 +31,7 @@ How a family is recognised
 - **Distance**: nearest of a dense (u, v) sample of the surface (cKDTree,
   cached per parameter vector), refined by vectorised Gauss–Newton steps on
   (u, v).
-- **Fit**: ``scipy.optimize.least_squares`` on the parameters and the
+- **Fit**: damped Gauss–Newton (:func:`..base.gauss_newton`) on the parameters and the
   placement (rotation vector, translation), residuals the signed normal
   distances at the feet.
 
