@@ -713,3 +713,16 @@ def test_the_command_skips_the_final_garbage_collection(monkeypatch):
         assert gc.get_freeze_count() > before
     finally:
         gc.unfreeze()
+
+
+def test_a_run_loads_no_library_it_does_not_use():
+    """Every run pays its imports before it reads a point: the optimiser (only the annulus's and
+    the thread's final fits use it), plotting, Dask and scikit-learn stay out of a plain
+    segmentation, in a fresh process as the command runs."""
+    code = ("import sys, numpy as np, houghcad.cli\n"
+            "from houghcad import synth\n"
+            "from houghcad.pipeline import segment\n"
+            "segment(synth.block_with_hole_and_slot(seed=0, n_points=3000).points)\n"
+            "print(' '.join(m for m in ('scipy.optimize', 'matplotlib', 'dask', 'sklearn') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""

@@ -23,7 +23,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares, minimize
 from scipy.special import ndtr
 from scipy.spatial import cKDTree
 
@@ -69,6 +68,8 @@ def concentric_circles(Q: np.ndarray, c0: np.ndarray, scale: float, radii=None):
     def res(x):
         r = np.linalg.norm(Q - x[:2], axis=1)
         return np.minimum(np.abs(r - x[2]), np.abs(r - x[3]))
+
+    from scipy.optimize import least_squares  # here: its import is 66 ms of every run's start
 
     try:
         sol = least_squares(res, np.r_[c0, r0], loss="soft_l1", f_scale=max(scale, 1e-9), max_nfev=100)
@@ -145,6 +146,8 @@ def ring_fit(Q: np.ndarray, c0, b0: float, a0: float, s0: float, smin: float, tr
     # the band shrinks under a wide blur.
     bounds = [(None, None), (None, None), (0.0, None), (0.25 * w0, 4 * w0), (smin, max(0.25 * w0, smin))]
     keep = np.ones(len(Q), bool)
+    from scipy.optimize import minimize  # here: its import is 66 ms of every run's start
+
     for it in range(trims + 1):
         if it:
             k = _complete_sectors(Q, x[:2], x[2], x[2] + x[3], x[4])
@@ -175,6 +178,8 @@ def circle_centre(Q: np.ndarray) -> np.ndarray:
     A = np.c_[2 * Q, np.ones(len(Q))]
     c0 = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0][:2]
     r0 = float(np.linalg.norm(Q - c0, axis=1).mean())
+    from scipy.optimize import least_squares  # here: its import is 66 ms of every run's start
+
     try:
         sol = least_squares(lambda x: np.linalg.norm(Q - x[:2], axis=1) - x[2], np.r_[c0, r0], max_nfev=50)
     except Exception:
