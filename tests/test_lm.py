@@ -7,24 +7,20 @@ import pytest
 from scipy.optimize import least_squares
 
 from houghcad.families import _lm
-from houghcad.families._geometry import tangent_basis
+from houghcad.families._geometry import tangent_basis, unit
 from houghcad.families.cone import _refit_rows as cone_rows
 from houghcad.families.torus import _refit_rows as torus_rows
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
-
-
 def _cone_problem(rng: np.random.Generator, m: int, noise: float, half_angle: float, arc: float):
     """Points on a cone patch and a perturbed start, in the cone refit's parametrisation."""
-    a, apex = _unit(rng.normal(size=3)), rng.normal(size=3)
+    a, apex = unit(rng.normal(size=3)), rng.normal(size=3)
     e1, e2 = tangent_basis(a)
     h, th = rng.uniform(0.5, 2.0, m), rng.uniform(0.0, arc, m)
     P = apex + h[:, None] * a + (h * np.tan(half_angle))[:, None] * (
         np.cos(th)[:, None] * e1 + np.sin(th)[:, None] * e2)
     P += rng.normal(scale=noise, size=P.shape)
-    p0, a0 = apex + rng.normal(scale=0.05, size=3), _unit(a + rng.normal(scale=0.05, size=3))
+    p0, a0 = apex + rng.normal(scale=0.05, size=3), unit(a + rng.normal(scale=0.05, size=3))
     b1, b2 = tangent_basis(a0)
     return (P, p0, a0, b1, b2), np.r_[0, 0, 0, 0, 0, half_angle * rng.uniform(0.9, 1.1)]
 
@@ -32,13 +28,13 @@ def _cone_problem(rng: np.random.Generator, m: int, noise: float, half_angle: fl
 def _torus_problem(rng: np.random.Generator, m: int, noise: float):
     R = rng.uniform(0.5, 3.0)
     r = rng.uniform(0.1, 0.9) * R
-    a, c = _unit(rng.normal(size=3)), rng.normal(size=3)
+    a, c = unit(rng.normal(size=3)), rng.normal(size=3)
     e1, e2 = tangent_basis(a)
     u, v = rng.uniform(0, 2 * np.pi, m), rng.uniform(0, rng.uniform(0.5, 2 * np.pi), m)
     rad = np.cos(u)[:, None] * e1 + np.sin(u)[:, None] * e2
     P = c + (R + r * np.cos(v))[:, None] * rad + (r * np.sin(v))[:, None] * a
     P += rng.normal(scale=noise, size=P.shape)
-    c0, a0 = c + rng.normal(scale=0.05, size=3), _unit(a + rng.normal(scale=0.05, size=3))
+    c0, a0 = c + rng.normal(scale=0.05, size=3), unit(a + rng.normal(scale=0.05, size=3))
     b1, b2 = tangent_basis(a0)
     return (P, c0, a0, b1, b2), np.r_[0, 0, 0, 0, 0, R * rng.uniform(0.9, 1.1), r * rng.uniform(0.9, 1.1)]
 

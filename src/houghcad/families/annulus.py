@@ -33,6 +33,9 @@ from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
 from .cylinder import circle_centers
 from ._helix import band_edges
 
+# scipy.optimize is imported in the functions that call it: its import is 66 ms of every run's
+# start, and only this family (with the thread's final fit) uses it.
+
 
 def boundary_directions(Q: np.ndarray, k: int = 20, ratio: float = 0.45) -> tuple[np.ndarray, np.ndarray, float]:
     """Boundary points of a 2-D point set Q (n, 2) and their inward directions.
@@ -69,7 +72,7 @@ def concentric_circles(Q: np.ndarray, c0: np.ndarray, scale: float, radii=None):
         r = np.linalg.norm(Q - x[:2], axis=1)
         return np.minimum(np.abs(r - x[2]), np.abs(r - x[3]))
 
-    from scipy.optimize import least_squares  # here: its import is 66 ms of every run's start
+    from scipy.optimize import least_squares
 
     try:
         sol = least_squares(res, np.r_[c0, r0], loss="soft_l1", f_scale=max(scale, 1e-9), max_nfev=100)
@@ -146,7 +149,7 @@ def ring_fit(Q: np.ndarray, c0, b0: float, a0: float, s0: float, smin: float, tr
     # the band shrinks under a wide blur.
     bounds = [(None, None), (None, None), (0.0, None), (0.25 * w0, 4 * w0), (smin, max(0.25 * w0, smin))]
     keep = np.ones(len(Q), bool)
-    from scipy.optimize import minimize  # here: its import is 66 ms of every run's start
+    from scipy.optimize import minimize
 
     for it in range(trims + 1):
         if it:
@@ -178,7 +181,7 @@ def circle_centre(Q: np.ndarray) -> np.ndarray:
     A = np.c_[2 * Q, np.ones(len(Q))]
     c0 = np.linalg.lstsq(A, (Q**2).sum(1), rcond=None)[0][:2]
     r0 = float(np.linalg.norm(Q - c0, axis=1).mean())
-    from scipy.optimize import least_squares  # here: its import is 66 ms of every run's start
+    from scipy.optimize import least_squares
 
     try:
         sol = least_squares(lambda x: np.linalg.norm(Q - x[:2], axis=1) - x[2], np.r_[c0, r0], max_nfev=50)
