@@ -445,31 +445,3 @@ def test_noisy_normals_take_as_many_neighbours_as_the_noise_needs(monkeypatch):
     assert wide == "pca-k64" and used.startswith("pca-k") and int(used[5:]) < 56
     assert walls_err < walls_wide - 5
     assert all_err < 4.0
-
-
-def _two_densities(seed: int, dense: int = 8000, sparse: int = 2000) -> np.ndarray:
-    """A 2 × 1 rectangle in z = 0, its left unit square sampled ``dense`` points at random and its
-    right one ``sparse``."""
-    rng = np.random.default_rng(seed)
-    left = np.c_[rng.random(dense), rng.random(dense), np.zeros(dense)]
-    right = np.c_[1 + rng.random(sparse), rng.random(sparse), np.zeros(sparse)]
-    return np.vstack([left, right])
-
-
-@pytest.mark.parametrize("seed", [0, 1])
-def test_point_areas_sum_to_the_area_however_unevenly_sampled(seed):
-    P = _two_densities(seed)
-    dist, nbr = cKDTree(P).query(P, k=16)
-    a = preprocess_module.point_areas(dist, nbr)
-    assert a.dtype == np.float32 and a.shape == (len(P),) and (a > 0).all()
-    # Each unit square reads as 1 within 10 % whether it holds 80 % or 20 % of the points.
-    assert 0.9 < a[:8000].sum() < 1.1 and 0.9 < a[8000:].sum() < 1.1
-
-
-def test_preprocessed_areas_are_in_standard_units():
-    P = _two_densities(0)
-    pre = preprocess(P)
-    # The rectangle's area, 2, scaled as lengths are (standard units: the diagonal's change).
-    s = pre.diagonal / np.hypot(2.0, 1.0)
-    assert pre.area is not None and pre.area.dtype == np.float32
-    assert 0.9 < pre.area.sum() / (2.0 * s * s) < 1.1

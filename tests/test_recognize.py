@@ -320,38 +320,3 @@ def test_the_paper_noise_block_at_sigma_a_tenth_comes_out_as_its_five_primitives
         assert seg.type == kind
         for name, value in params.items():
             assert seg.params[name] == pytest.approx(value, abs=0.05)
-
-
-def test_the_first_round_keeps_a_share_of_the_area_not_of_the_points():
-    from houghcad.pipeline import first_round_context
-
-    # One plane, its left unit square sampled four times as densely as its right one.
-    rng = np.random.default_rng(0)
-    left = np.c_[rng.random(8000), rng.random(8000), np.zeros(8000)]
-    right = np.c_[1 + rng.random(2000), rng.random(2000), np.zeros(2000)]
-    P = np.vstack([left, right])
-    ctx = _context(P)
-    g = first_round_context(ctx, len(P))
-    share = ctx.tol.scale.first_round_share
-    assert g.min_area == pytest.approx(share * float(ctx.pre.area.sum(dtype=np.float64)), rel=1e-6)
-    # Counted first in the points that area holds where the sampling is sparse: fewer than
-    # the share of the points.
-    assert ctx.min_points <= g.min_points < share * len(P)
-    # Two patches of 2 % of the area each: the sparse one holds 0.8 % of the points, the dense
-    # one 3.2 %; both pass by area. A sparse patch of 0.6 % of the area does not.
-    x, y = P[:, 0], P[:, 1]
-    sparse = np.flatnonzero((x > 1.5) & (x < 1.7) & (y < 0.2))
-    dense = np.flatnonzero((x > 0.3) & (x < 0.5) & (y < 0.2))
-    small = np.flatnonzero((x > 1.5) & (x < 1.62) & (y < 0.1))
-    assert len(sparse) < share * len(P) < len(dense)
-    fam = REGISTRY["plane"]
-    prim = Primitive("plane", {"normal": np.array([0.0, 0.0, 1.0]), "offset": 0.0, "point": np.zeros(3)})
-    prim = fam.fit(prim, ctx.pre.points, ctx.pre.normals)
-
-    def cand(idx):
-        d = fam.distance(prim, ctx.pre.points[idx])
-        return Candidate(fam, prim, idx, mean_fitting_error(d, ctx.pre.points[idx]), d)
-
-    free = np.ones(len(P), bool)
-    kept = select([cand(sparse), cand(dense), cand(small)], free, replace(g, min_points=ctx.min_points))
-    assert sorted(len(c.indices) for c in kept) == sorted([len(sparse), len(dense)])

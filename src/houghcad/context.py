@@ -40,9 +40,6 @@ class Context:
         Accumulator resolution for lengths.
     min_points : int
         Smallest segment.
-    min_area : float
-        Smallest segment's surface area (standard units², summed :attr:`Preprocessed.area`);
-        0 for none. The whole-cloud round's (see :func:`houghcad.pipeline.recognition`).
     persistence : float
         Peak persistence threshold, fraction of max H.
     tol : Tolerances
@@ -67,7 +64,6 @@ class Context:
     link: float
     cell: float
     min_points: int
-    min_area: float = 0.0
     persistence: float = DEFAULT_PERSISTENCE
     max_peaks: int = _SCALE.max_peaks
     max_directions: int = _SCALE.max_directions

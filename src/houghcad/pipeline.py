@@ -76,30 +76,14 @@ def recognition(seg: Segmentation, run: Run) -> Segmentation:
     """The families voted on the whole cloud; accepted segments take the
     points within ε of their primitive (paper §5.2).
 
-    The first round keeps only substantial segments (1 % of the surface's
-    area): smaller ones, and the families voted per cluster, are settled in
-    the splitting phase where every family competes for the same points."""
+    The first round keeps only substantial segments (1 % of the cloud):
+    smaller ones, and the families voted per cluster, are settled in the
+    splitting phase where every family competes for the same points."""
     ctx = run.ctx
-    accept(recognize(np.arange(seg.n_points), run.voted, first_round_context(ctx, seg.n_points), seg.free),
-           seg, ctx)
+    share = ctx.tol.scale.first_round_share
+    gctx = replace(ctx, min_points=max(ctx.min_points, int(seg.n_points * share)))
+    accept(recognize(np.arange(seg.n_points), run.voted, gctx, seg.free), seg, ctx)
     return seg
-
-
-def first_round_context(ctx: Context, n_points: int) -> Context:
-    """``ctx`` for the whole-cloud round: segments of at least ``first_round_share`` of the
-    surface's area (:attr:`Preprocessed.area`), whatever the sampling density, which a share of
-    the points is only under even sampling. Candidates are counted first in the points that
-    area holds where the sampling is sparse (``first_round_sparse_quantile`` of the points'
-    areas), then measured."""
-    t = ctx.tol.scale
-    share = t.first_round_share
-    area = ctx.pre.area
-    if area is None or not len(area):
-        return replace(ctx, min_points=max(ctx.min_points, int(n_points * share)))
-    total = float(area.sum(dtype=np.float64))
-    sparse = float(np.quantile(area, min(max(t.first_round_sparse_quantile, 0.0), 1.0)))
-    count = int(share * total / sparse) if sparse > 0 else int(n_points * share)
-    return replace(ctx, min_points=max(ctx.min_points, count), min_area=share * total)
 
 
 def absorb_pass(seg: Segmentation, run: Run) -> Segmentation:

@@ -111,9 +111,6 @@ class Preprocessed:
     reach : float
         Median distance to the 6th nearest neighbour (standard units): the
         scale at which the sampling is connected.
-    area : ndarray of float32, shape (n,), or None
-        The surface area each point samples (standard units²): :func:`point_areas`. None where
-        the points were replaced after preprocessing.
     crease : ndarray of bool, shape (n,), or None
         Points of a clean cloud on a crease (no local quadric fits them), whose normals were
         voted: there the normal may be a neighbouring face's. None when no point was voted.
@@ -132,7 +129,6 @@ class Preprocessed:
     diagonal: float
     normals_method: str
     reach: float = 0.0
-    area: np.ndarray | None = None
     crease: np.ndarray | None = None
     exact: bool = False
     #: Neighbour tables read so far, by (k, radius) (see :meth:`neighbours_within`); not
@@ -220,37 +216,14 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     # Connectivity scale: the 6th neighbour's distance is about 1.5 spacings
     # on grid-like sampling but 3 on random (Poisson) sampling.
     reach = float(np.median(dist[:, min(6, dist.shape[1] - 1)]))
-    area = point_areas(hood.dist, hood.nbr)
 
     R, x, nrm, s2 = _standard_frame(x, nrm, workers)
     tree = cKDTree(x)
     T = Similarity(center=center, R=R, scale=scale0 * s2)
     diag = float(np.linalg.norm(np.ptp(x, axis=0)))
     return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
-                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2,
-                        area=area * np.float32(s2 * s2), crease=crease,
+                        noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2, crease=crease,
                         exact=hood.exact)
-
-
-#: Rows of the neighbour table averaged at once in :func:`point_areas` (bounds the gathered block).
-_AREA_ROWS = 1 << 18
-
-
-def point_areas(dist: np.ndarray, nbr: np.ndarray) -> np.ndarray:
-    """The surface area each point samples, float32 (n,), in the units² of ``dist``.
-
-    The disc through a point's 6th nearest neighbour holds 6 others: π d₆² / 6 a point (unbiased
-    for random sampling, where λ π d₆² has mean 6; 5 % over on a square grid). Averaged
-    over the point's neighbourhood (``nbr`` (n, k), ``dist`` (n, k) with the point itself first),
-    since one point's 6th neighbour is a noisy measure. Summed over a segment, it is the segment's
-    area however unevenly the surface was sampled, where a count of points is not.
-    """
-    d = dist[:, min(6, dist.shape[1] - 1)].astype(np.float32)
-    a = np.float32(np.pi / 6) * d * d
-    out = np.empty(len(a), np.float32)
-    for start in range(0, len(a), _AREA_ROWS):
-        out[start:start + _AREA_ROWS] = a[nbr[start:start + _AREA_ROWS]].mean(axis=1)
-    return out
 
 
 def _unit_cube(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:

@@ -162,7 +162,7 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
     for comp in dense_subsets(P[near], ctx.link, ctx.min_points, t.dense_min_samples):
         loc = near[comp]
         loc = loc[ok[loc]]
-        if len(loc) < ctx.min_points or _short_of_area(idx[loc], ctx):
+        if len(loc) < ctx.min_points:
             continue
         X = P[loc]
         if not _patch(X, ctx):
@@ -212,11 +212,6 @@ def _trimmed_refits(fam: Family, prim: Primitive, P: np.ndarray, N: np.ndarray, 
         prim = new
         ok, d = inliers(fam, prim, P, N, ctx.tau, ctx.cos_angle)
     return prim, ok, d
-
-
-def _short_of_area(idx: np.ndarray, ctx: Context) -> bool:
-    """Whether the points ``idx`` (global indices) cover less surface than ``ctx.min_area``."""
-    return ctx.min_area > 0 and ctx.pre.area is not None and float(ctx.pre.area[idx].sum()) < ctx.min_area
 
 
 def _patch(X: np.ndarray, ctx: Context) -> bool:
@@ -392,7 +387,7 @@ def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Cand
                 done[j] = True
         c = cands[best]
         left = c.indices[free[c.indices]]
-        if len(left) < max(ctx.min_points, keep_share * len(c.indices)) or _short_of_area(left, ctx):
+        if len(left) < max(ctx.min_points, keep_share * len(c.indices)):
             continue
         c = replace(c, indices=left)
         free[left] = False
