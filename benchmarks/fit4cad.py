@@ -5,7 +5,7 @@ Usage::
 
     python benchmarks/fit4cad.py ../shared/fit4cad/training_set [--limit N] [--names PC1,PC2]
         [--families simple] [--jobs 1] [--timeout 600] [--no-write] [--out DIR_OR_CSV]
-        [--label NAME] [--fraction F]
+        [--label NAME] [--fraction F] [--uneven U]
 
 Every cloud ``PCn.txt`` that has a ``PCn_primitives.txt`` beside it is segmented on houghcad's
 batch engine (:mod:`houghcad.engine`, the one behind ``houghcad batch``): a local Dask cluster of
@@ -23,7 +23,9 @@ even with ``--no-write``.
 
 ``--fraction F`` segments a seeded random share F of each cloud's points (the ground truth
 restricted to them): the same parts sampled sparser, where faces are narrower in spacings and hold
-fewer points. A lens on generalisation, never a figure to tune on.
+fewer points. ``--uneven U`` thins each cloud along a seeded direction, one end keeping 1 − U of
+its points and the other all of them, as a scanner samples a part seen from one side: faces of
+one part at different densities. Both are lenses on generalisation, never figures to tune on.
 """
 
 from __future__ import annotations
@@ -148,6 +150,7 @@ def process_cloud(
     segmenter: str = DEFAULT_SEGMENTER,
     on_loaded: Callable[[int, int], None] | None = None,
     fraction: float = 1.0,
+    uneven: float = 0.0,
 ) -> dict[str, Any]:
     """Segment one cloud in this process and evaluate it; never raises for a failing pipeline.
 
@@ -172,6 +175,8 @@ def process_cloud(
         points = np.asarray(points.points)  # read_points returns a PointCloud
         if fraction < 1.0:
             points, gt = sparser(name, points, gt, fraction)
+        if uneven > 0.0:
+            points, gt = unevener(name, points, gt, uneven)
         n = int(points.shape[0])
         known["n_points"] = n
         if on_loaded is not None:
@@ -230,14 +235,32 @@ def sparser(name: str, points: np.ndarray, gt: list[np.ndarray], fraction: float
     return points[keep], [r[r >= 0] for r in (new[np.asarray(g)] for g in gt)]
 
 
+def unevener(name: str, points: np.ndarray, gt: list[np.ndarray], uneven: float) \
+        -> tuple[np.ndarray, list[np.ndarray]]:
+    """The (n, 3) ``points`` sampled unevenly, as a scanner sees a part from one side, and the
+    ground-truth segments restricted to them and renumbered: each point kept with a probability
+    falling linearly from 1 to ``1 - uneven`` along a direction across the cloud (0.9: one end ten
+    times sparser than the other), as :class:`houghcad.synth.Perturbation`'s ``uneven``. The
+    direction and the draws are seeded by the cloud's ``name``."""
+    rng = np.random.default_rng(zlib.crc32(b"uneven:" + name.encode()))
+    d = rng.standard_normal(3)
+    t = points @ (d / np.linalg.norm(d))
+    t = (t - t.min()) / max(float(np.ptp(t)), 1e-300)
+    keep = np.flatnonzero(rng.random(len(points)) < 1.0 - uneven * t)
+    new = np.full(len(points), -1, dtype=np.int64)
+    new[keep] = np.arange(len(keep))
+    return points[keep], [r[r >= 0] for r in (new[np.asarray(g)] for g in gt)]
+
+
 def _cloud_task(args: tuple) -> dict[str, Any]:
     """The task run by a batch-engine worker: one cloud; what it learns early (points, ground-truth
     segments) goes to the client at once, so that a cloud whose worker dies keeps it."""
     from houghcad.engine import report
 
-    name, cloud, gt, families, segmenter, fraction = args
+    name, cloud, gt, families, segmenter, fraction, uneven = args
     return process_cloud(name, cloud, gt, families, segmenter,
-                         on_loaded=lambda n, g: report("loaded", n_points=n, n_gt=g), fraction=fraction)
+                         on_loaded=lambda n, g: report("loaded", n_points=n, n_gt=g), fraction=fraction,
+                         uneven=uneven)
 
 
 def run_clouds(
@@ -249,6 +272,7 @@ def run_clouds(
     progress: Callable[[int, int, dict[str, Any]], None] | None = None,
     client: Any = None,
     fraction: float = 1.0,
+    uneven: float = 0.0,
 ) -> list[dict[str, Any]]:
     """Run every cloud on the batch engine (:class:`houghcad.engine.Engine`): a local Dask cluster
     of *jobs* single-threaded worker processes, started once, so that start-up (imports, compiled
@@ -266,6 +290,9 @@ def run_clouds(
         Run on this cluster instead of starting one (*jobs* is then ignored).
     fraction : float
         Share of each cloud's points segmented (:func:`sparser`); 1 keeps them all.
+    uneven : float
+        How unevenly the kept points are thinned across each cloud (:func:`unevener`); 0 not at
+        all.
 
     Returns
     -------
@@ -295,7 +322,7 @@ def run_clouds(
         if progress is not None:
             progress(len(rows), len(clouds), row)
 
-    items = [(name, cloud, gt, families, segmenter, fraction) for name, cloud, gt in clouds]
+    items = [(name, cloud, gt, families, segmenter, fraction, uneven) for name, cloud, gt in clouds]
     with Engine(client, workers=None if client is not None else max(1, jobs), retries=0, timeout=timeout) as engine:
         engine.run(_cloud_task, items, on_event=on_event, on_outcome=on_outcome)
     return [rows[i] for i in range(len(clouds))]
@@ -454,6 +481,10 @@ def section_markdown(
         w(f"- Sparser: each cloud keeps a random {s['fraction']:.0%} of its points, seeded by its name, and "
           "its ground truth those of them (`--fraction`): the same parts, faces narrower in point spacings "
           "and holding fewer points. A lens on generalisation, not a figure to tune on.\n")
+    if s.get("uneven", 0.0) > 0.0:
+        w(f"- Uneven: each cloud thinned along a direction seeded by its name, one end keeping "
+          f"{1 - s['uneven']:.0%} of its points and the other all of them (`--uneven`), as a scanner samples a "
+          "part seen from one side. A lens, not a figure to tune on.\n")
     w("\n")
     w("| measure | mean | median |\n|---|---|---|\n")
     for m in MEASURES:
@@ -643,9 +674,12 @@ def _parser() -> argparse.ArgumentParser:
                         "(default benchmarks/results/); written even with --no-write when given")
     p.add_argument("--label", default=None,
                    help="section label in BENCHMARKS.md (default: the --families preset's name; "
-                        "needed with --fraction or a list of families)")
+                        "needed with --fraction, --uneven or a list of families)")
     p.add_argument("--fraction", type=float, default=1.0,
                    help="segment a seeded random share of each cloud's points, in (0, 1] (default 1)")
+    p.add_argument("--uneven", type=float, default=0.0,
+                   help="thin each cloud unevenly: the kept share falls linearly from 1 to 1 - U along a "
+                        "seeded direction, U in [0, 1) (default 0)")
     # Hidden: lets the script be exercised with a stand-in before/without the real pipeline.
     p.add_argument("--segmenter", default=DEFAULT_SEGMENTER, help=argparse.SUPPRESS)
     return p
@@ -665,10 +699,12 @@ def main(argv: list[str] | None = None) -> int:
         return fail("--jobs, --limit and --timeout must be positive")
     if not 0.0 < args.fraction <= 1.0:
         return fail(f"--fraction {args.fraction}: a share of the points, in (0, 1]")
+    if not 0.0 <= args.uneven < 1.0:
+        return fail(f"--uneven {args.uneven}: how much sparser one end gets, in [0, 1)")
     if args.label is None:
         # A run of other families or of fewer points must not replace the default run's section.
-        if args.fraction < 1.0 or not _LABEL_RE.fullmatch(args.families):
-            return fail("--label is needed with --fraction or a list of --families")
+        if args.fraction < 1.0 or args.uneven > 0.0 or not _LABEL_RE.fullmatch(args.families):
+            return fail("--label is needed with --fraction, --uneven or a list of --families")
         args.label = args.families
     if not _LABEL_RE.fullmatch(args.label):
         return fail(f"--label {args.label!r}: use letters, digits, '_', '.', '-' only")
@@ -693,11 +729,12 @@ def main(argv: list[str] | None = None) -> int:
     date = _now()
     t0 = time.perf_counter()
     rows = run_clouds(clouds, args.families, args.jobs, args.timeout, args.segmenter, progress,
-                      fraction=args.fraction)
+                      fraction=args.fraction, uneven=args.uneven)
     s = summarize(rows)
     s["wall_seconds"] = time.perf_counter() - t0
     s["jobs"] = args.jobs
     s["fraction"] = args.fraction
+    s["uneven"] = args.uneven
     print(summary_text(s), file=sys.stderr)
 
     if not args.no_write or args.out is not None:

@@ -136,6 +136,30 @@ def test_main_refuses_a_fraction_outside_the_unit_interval(tiny_set: Path, capsy
     assert "--fraction" in capsys.readouterr().err
 
 
+def test_unevener_thins_one_end_and_restricts_the_ground_truth():
+    rng = np.random.default_rng(0)
+    pts = rng.random((20000, 3))
+    gt = [np.flatnonzero(pts[:, 0] < 0.5), np.flatnonzero(pts[:, 0] >= 0.5)]
+    p, g = bench.unevener("PC7", pts, gt, 0.9)
+    again, _ = bench.unevener("PC7", pts, gt, 0.9)
+    assert np.array_equal(p, again)
+    assert not np.array_equal(bench.unevener("PC8", pts, gt, 0.9)[0], p)  # seeded by the cloud
+    # About 55 % kept (the mean of 1 - 0.9 t over a uniform t, nearly), unevenly: along some
+    # direction the kept share falls from 1 to 0.1.
+    assert 0.4 < len(p) / len(pts) < 0.7
+    for old, new in zip(gt, g):
+        assert np.array_equal(p[new], pts[old][np.isin(pts[old][:, 0], p[:, 0])])
+    d, _ = np.linalg.eigh(np.cov(p.T))
+    assert d.max() / d.min() > 1.05  # no longer the cube's isotropic spread
+
+
+def test_main_refuses_an_uneven_share_outside_its_interval(tiny_set: Path, capsys):
+    assert bench.main([str(tiny_set), "--no-write", "--uneven", "1", "--label", "u"]) == 2
+    assert "--uneven" in capsys.readouterr().err
+    assert bench.main([str(tiny_set), "--no-write", "--uneven", "0.5"]) == 2
+    assert "--label" in capsys.readouterr().err
+
+
 def test_main_writes_csv_and_summary(tiny_set: Path, tmp_path: Path, capsys):
     out = tmp_path / "rows.csv"
     code = bench.main([str(tiny_set), "--names", "PC2,PC10", "--no-write", "--out", str(out),
