@@ -230,7 +230,13 @@ def sparser(name: str, points: np.ndarray, gt: list[np.ndarray], fraction: float
     n = len(points)
     rng = np.random.default_rng(zlib.crc32(name.encode()))
     keep = np.sort(rng.choice(n, min(n, max(int(n * fraction), 200)), replace=False))
-    new = np.full(n, -1, dtype=np.int64)
+    return _kept(points, gt, keep)
+
+
+def _kept(points: np.ndarray, gt: list[np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The points ``keep`` (sorted indices) of ``points`` (n, 3), and the ground-truth segments
+    restricted to them and renumbered."""
+    new = np.full(len(points), -1, dtype=np.int64)
     new[keep] = np.arange(len(keep))
     return points[keep], [r[r >= 0] for r in (new[np.asarray(g)] for g in gt)]
 
@@ -246,10 +252,7 @@ def unevener(name: str, points: np.ndarray, gt: list[np.ndarray], uneven: float)
     d = rng.standard_normal(3)
     t = points @ (d / np.linalg.norm(d))
     t = (t - t.min()) / max(float(np.ptp(t)), 1e-300)
-    keep = np.flatnonzero(rng.random(len(points)) < 1.0 - uneven * t)
-    new = np.full(len(points), -1, dtype=np.int64)
-    new[keep] = np.arange(len(keep))
-    return points[keep], [r[r >= 0] for r in (new[np.asarray(g)] for g in gt)]
+    return _kept(points, gt, np.flatnonzero(rng.random(len(points)) < 1.0 - uneven * t))
 
 
 def _cloud_task(args: tuple) -> dict[str, Any]:
