@@ -543,8 +543,17 @@ def atomic_write(path: Path, text: str) -> None:
 
 
 def write_section(md_path: Path, label: str, section: str) -> None:
-    """Replace the ``fit4cad:LABEL`` section of *md_path*, or append it; create the file if needed."""
-    replace_section(md_path, f"fit4cad:{label}", section)
+    """Replace the ``fit4cad:LABEL`` section of *md_path*; a new label goes after the last Fit4CAD
+    section (a lens beside the full-density table), or at the end when there is none; create the
+    file if needed."""
+    marker = f"fit4cad:{label}"
+    text = md_path.read_text(encoding="utf-8") if md_path.exists() else ""
+    ends = list(re.finditer(r"<!-- fit4cad:[\w.-]+:end -->\n?", text))
+    if f"<!-- {marker}:begin -->" in text or not ends:
+        replace_section(md_path, marker, section)
+        return
+    i = ends[-1].end()
+    atomic_write(md_path, text[:i] + "\n" + section + text[i:])
 
 
 def replace_section(md_path: Path, marker: str, section: str) -> None:

@@ -201,6 +201,12 @@ def test_write_section_replaces_or_appends(tmp_path: Path):
     assert text.count("fit4cad:simple:begin") == 1 and "\nB\n" in text and "<details>" not in text
     assert "hand-written notes" in text and text.index("simple:end") < text.index("all:begin")
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+    # A new label goes beside the other Fit4CAD sections, not after whatever follows them.
+    md.write_text(md.read_text() + "\n<!-- other:begin -->\nC\n<!-- other:end -->\n")
+    bench.write_section(md, "uneven", "<!-- fit4cad:uneven:begin -->\nD\n<!-- fit4cad:uneven:end -->\n")
+    text = md.read_text()
+    assert text.index("all:end") < text.index("uneven:begin") < text.index("other:begin")
+    assert text.count("fit4cad:uneven:begin") == 1 and text.endswith("<!-- other:end -->\n")
 
 
 def _no_tmp_left(folder: Path) -> bool:
