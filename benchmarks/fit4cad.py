@@ -248,11 +248,10 @@ def unevener(name: str, points: np.ndarray, gt: list[np.ndarray], uneven: float)
     falling linearly from 1 to ``1 - uneven`` along a direction across the cloud (0.9: one end ten
     times sparser than the other), as :class:`houghcad.synth.Perturbation`'s ``uneven``. The
     direction and the draws are seeded by the cloud's ``name``."""
+    from houghcad.synth.perturb import uneven_keep
+
     rng = np.random.default_rng(zlib.crc32(b"uneven:" + name.encode()))
-    d = rng.standard_normal(3)
-    t = points @ (d / np.linalg.norm(d))
-    t = (t - t.min()) / max(float(np.ptp(t)), 1e-300)
-    return _kept(points, gt, np.flatnonzero(rng.random(len(points)) < 1.0 - uneven * t))
+    return _kept(points, gt, np.flatnonzero(uneven_keep(points, uneven, rng)))
 
 
 def _cloud_task(args: tuple) -> dict[str, Any]:

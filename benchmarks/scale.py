@@ -27,6 +27,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import resource
 import subprocess
@@ -70,10 +71,11 @@ def _peak_mb() -> float:
     mark. Not ``ru_maxrss``: Linux carries that over from the parent through fork and exec, so a
     child read at least the benchmark's own peak (the 1M-point clouds it had generated). Read here
     rather than through ``houghcad.engine``, whose import would count in CGAL's peak."""
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024.0  # kB
+    with contextlib.suppress(OSError):  # no /proc: the fallback below
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0  # kB
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
 
 

@@ -113,6 +113,16 @@ def _holes(points: Array, fraction: float, n_holes: int, rng: np.random.Generato
     return keep
 
 
+def uneven_keep(points: Array, uneven: float, rng: np.random.Generator) -> Array:
+    """Which of the points (n, 3) an uneven sampling keeps, bool (n,): each with a probability
+    falling linearly from 1 to ``1 - uneven`` along a direction drawn from ``rng`` across the
+    points (0.9: one end ten times sparser than the other)."""
+    d = rng.standard_normal(3)
+    t = points @ (d / np.linalg.norm(d))
+    t = (t - t.min()) / max(float(np.ptp(t)), 1e-300)
+    return rng.random(len(points)) < 1.0 - uneven * t
+
+
 def perturb(cloud: SynthCloud, p: Perturbation, seed: int = 0) -> SynthCloud:
     """A copy of ``cloud`` perturbed by ``p`` (see :class:`Perturbation`), seeded by ``seed``.
 
@@ -133,10 +143,7 @@ def perturb(cloud: SynthCloud, p: Perturbation, seed: int = 0) -> SynthCloud:
         pts[on] = _bump(pts[on], nrm[on], p.bumps * diag, p.bump_width * diag, p.n_bumps, g_bump)
     keep = np.ones(len(pts), bool)
     if p.uneven > 0:
-        d = g_sample.standard_normal(3)
-        t = pts @ (d / np.linalg.norm(d))
-        t = (t - t.min()) / max(float(np.ptp(t)), 1e-300)
-        keep &= g_sample.random(len(pts)) < 1.0 - p.uneven * t
+        keep &= uneven_keep(pts, p.uneven, g_sample)
     if p.missing > 0:
         keep &= _holes(pts, p.missing, p.holes, g_holes)
     idx = np.flatnonzero(keep)
