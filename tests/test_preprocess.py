@@ -445,3 +445,25 @@ def test_noisy_normals_take_as_many_neighbours_as_the_noise_needs(monkeypatch):
     assert wide == "pca-k64" and used.startswith("pca-k") and int(used[5:]) < 56
     assert walls_err < walls_wide - 5
     assert all_err < 4.0
+
+
+def test_link_scale_reads_how_much_sparser_the_sampling_is_around_each_point():
+    """Half a plane 4 times sparser (spacing twice as wide) than the other: scale about 2 there,
+    1 on the dense half, and never below 1."""
+    rng = np.random.default_rng(1)
+    xy = np.vstack([rng.random((6000, 2)) * [0.5, 1.0], rng.random((1500, 2)) * [0.5, 1.0] + [0.5, 0.0]])
+    pre = preprocess(np.c_[xy, np.zeros(len(xy))])
+    s = pre.link_scale
+    assert s.dtype == np.float32 and s.shape == (len(xy),) and s.min() >= 1.0
+    assert np.median(s[:6000][xy[:6000, 0] < 0.4]) == 1.0
+    assert 1.7 < np.median(s[6000:][xy[6000:, 0] > 0.6]) < 2.3
+
+
+def test_link_scale_is_one_on_even_sampling_and_chunked_the_same(monkeypatch):
+    cloud = synth.single("sphere", n_points=3000, seed=0)
+    pre = preprocess(cloud.points)
+    assert np.percentile(pre.link_scale, 90) < 1.3
+    dist, nbr = pre.tree.query(pre.points, k=16)
+    whole = preprocess_module.link_scale(dist, nbr)
+    monkeypatch.setattr(preprocess_module, "LINK_SCALE_CHUNK", 7)
+    assert np.array_equal(preprocess_module.link_scale(dist, nbr), whole)

@@ -118,6 +118,10 @@ class Preprocessed:
         The points lie on their surfaces to rounding (a quarter or more of the quadruples of a
         point and its 3 nearest neighbours are coplanar to 0.002 spacings, which noise does not
         give): ``noise`` then reads curvature and thin features, not a scatter of the points.
+    link_scale : ndarray of float32, shape (n,), or None
+        How much sparser the sampling is around each point than over the cloud (at least 1):
+        :func:`link_scale`. The dense subsets link two points within the link times the smaller
+        of their scales. None links every point at the cloud's link.
     """
 
     points: np.ndarray
@@ -131,9 +135,14 @@ class Preprocessed:
     reach: float = 0.0
     crease: np.ndarray | None = None
     exact: bool = False
+    link_scale: np.ndarray | None = None
     #: Neighbour tables read so far, by (k, radius) (see :meth:`neighbours_within`); not
     #: carried over by ``dataclasses.replace``, which may change the points.
     _tables: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def link_scales(self, idx: np.ndarray) -> np.ndarray | None:
+        """The link scales (float32) of the points ``idx``, or None when the cloud has none."""
+        return None if self.link_scale is None else self.link_scale[idx]
 
     def neighbours_within(self, k: int, radius: float, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Each point's ``k`` nearest points within ``radius`` (standard units): their indices
@@ -223,7 +232,36 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     diag = float(np.linalg.norm(np.ptp(x, axis=0)))
     return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
                         noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2, crease=crease,
-                        exact=hood.exact)
+                        exact=hood.exact, link_scale=link_scale(hood.dist, hood.nbr))
+
+
+#: Rows per chunk of :func:`link_scale`'s gather: bounds its (rows, k) temporaries.
+LINK_SCALE_CHUNK = 1 << 18
+
+
+def link_scale(dist: np.ndarray, nbr: np.ndarray) -> np.ndarray:
+    """Each point's sampling scale relative to the cloud's, at least 1: float32 (n,).
+
+    ``dist`` and ``nbr`` (n, k) are each point's k nearest distances and indices, itself first.
+    A point's scale is the median, over its neighbourhood, of the 6th-neighbour distance,
+    divided by the cloud's median 6th-neighbour distance. A scan sees a part from one side:
+    the faces turned away or farther off are sampled several times more sparsely, and a
+    cloud-wide link, set by the median spacing, cuts such a face into fragments too small to
+    stand as segments. The neighbourhood's median, not the point's own distance, so that one
+    gap (a crease, a hole's rim) does not read as sparse sampling. Never below 1: where the
+    sampling is denser than the median the cloud's link already connects it, and a shorter
+    link would split the noise-spread points of a dense face.
+    """
+    n, k = dist.shape
+    d6 = dist[:, min(6, k - 1)].astype(np.float32)
+    ref = float(np.median(d6)) if n else 0.0
+    out = np.ones(n, np.float32)
+    if ref <= 0 or not np.isfinite(ref):
+        return out
+    for a in range(0, n, LINK_SCALE_CHUNK):
+        local = np.median(d6[nbr[a:a + LINK_SCALE_CHUNK]], axis=1)
+        out[a:a + LINK_SCALE_CHUNK] = np.maximum(local / ref, 1.0)
+    return out
 
 
 def _unit_cube(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:

@@ -23,9 +23,14 @@ from .state import Candidate, SegmentRecord, Segmentation, mean_fitting_error
 from .tolerances import RecognitionTolerances
 
 
-def dbscan(P: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
+def dbscan(P: np.ndarray, eps: float, min_samples: int, scale: np.ndarray | None = None) -> np.ndarray:
     """DBSCAN labels (n,) of P (n, 3), -1 for noise: the same labels as
     ``sklearn.cluster.DBSCAN(eps, min_samples=min_samples).fit_predict(P)``.
+
+    With ``scale`` (n,) (:attr:`Preprocessed.link_scale`), points i and j are neighbours
+    within ``eps * min(scale[i], scale[j])``: a sparsely sampled face links at its own spacing,
+    and where it meets a dense one the dense side's link holds. Without it, or with every
+    scale 1, the labels are scikit-learn's.
 
     Written here because the recognition clusters thousands of small inlier
     sets per cloud, where scikit-learn's per-call validation and neighbour
@@ -38,7 +43,7 @@ def dbscan(P: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
     n = len(P)
     if n == 0:
         return np.empty(0, np.int64)
-    pairs = cKDTree(P).query_pairs(eps, output_type="ndarray")
+    pairs = _pairs(P, eps, scale)
     deg = np.bincount(pairs.ravel(), minlength=n) + 1
     core = deg >= min_samples
     both = core[pairs[:, 0]] & core[pairs[:, 1]]
@@ -64,6 +69,17 @@ def dbscan(P: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
     border = cand < none
     lab[border] = cand[border]
     return lab
+
+
+def _pairs(P: np.ndarray, eps: float, scale: np.ndarray | None) -> np.ndarray:
+    """Index pairs (m, 2), i < j, of the points of P (n, 3) within ``eps`` times the smaller of
+    their ``scale`` (n,), or within ``eps`` when there is no scale."""
+    top = 1.0 if scale is None or not len(scale) else float(scale.max())
+    pairs = cKDTree(P).query_pairs(eps * top, output_type="ndarray")
+    if top > 1.0 and len(pairs):
+        d = np.linalg.norm(P[pairs[:, 0]] - P[pairs[:, 1]], axis=1)
+        pairs = pairs[d <= eps * np.minimum(scale[pairs[:, 0]], scale[pairs[:, 1]])]
+    return pairs
 
 
 # Union-find in numba instead of scipy's connected_components: the recognition clusters thousands
@@ -96,12 +112,14 @@ def _components(n: int, pairs: np.ndarray) -> np.ndarray:
     return root
 
 
-def dense_subsets(P: np.ndarray, link: float, min_points: int, min_samples: int) -> list[np.ndarray]:
+def dense_subsets(P: np.ndarray, link: float, min_points: int, min_samples: int,
+                  scale: np.ndarray | None = None) -> list[np.ndarray]:
     """Connected dense subsets of P (n, 3): DBSCAN components (core points
-    with ``min_samples`` neighbours within ``link``) of at least min_points."""
+    with ``min_samples`` neighbours within ``link``, scaled per point by ``scale`` (n,) as in
+    :func:`dbscan`) of at least min_points."""
     if len(P) < min_points:
         return []
-    lab = dbscan(P, link, min_samples)
+    lab = dbscan(P, link, min_samples, scale)
     ok = lab >= 0
     if not ok.any():
         return []
@@ -159,7 +177,8 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
     bridge = ok if ctx.pre.crease is None else ok | ctx.pre.crease[idx]
     near = np.flatnonzero(bridge & (d < ctx.tau))
     out = []
-    for comp in dense_subsets(P[near], ctx.link, ctx.min_points, t.dense_min_samples):
+    scale = ctx.pre.link_scales(idx[near])
+    for comp in dense_subsets(P[near], ctx.link, ctx.min_points, t.dense_min_samples, scale):
         loc = near[comp]
         loc = loc[ok[loc]]
         if len(loc) < ctx.min_points:
@@ -338,7 +357,7 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
             continue
         idx, dd = c.indices[k], c.distances[k]
         for comp in dense_subsets(ctx.pre.points[idx], ctx.link, ctx.min_points,
-                                  ctx.tol.recognition.dense_min_samples):
+                                  ctx.tol.recognition.dense_min_samples, ctx.pre.link_scales(idx)):
             out.append(Candidate(c.family, c.prim, idx[comp],
                                  mean_fitting_error(dd[comp], ctx.pre.points[idx[comp]]), dd[comp]))
     return out
