@@ -90,6 +90,20 @@ class Context:
     def cos_angle(self) -> float:
         return float(np.cos(self.angle))
 
+    def link_scales(self, idx: np.ndarray) -> np.ndarray | None:
+        """The link scales (float32) of the points ``idx``: :attr:`Preprocessed.link_scale` where
+        it reaches ``link_scale_from``, capped at ``link_scale_max``, else 1; None when every point
+        links at :attr:`link`."""
+        t = self.tol.scale
+        if self.pre.link_scale is None or (t.link_scale_max is not None and t.link_scale_max <= 1.0):
+            return None
+        s = self.pre.link_scale[idx]
+        far = s >= t.link_scale_from
+        if not far.any():
+            return None
+        s = np.where(far, s, np.float32(1.0))
+        return s if t.link_scale_max is None else np.minimum(s, np.float32(t.link_scale_max))
+
 
 def threads(ctx: Context) -> int:
     """Threads for a KD-tree query or per-point fit over a whole cloud: the run's jobs (1 inside a

@@ -121,7 +121,8 @@ class Preprocessed:
     link_scale : ndarray of float32, shape (n,), or None
         How much sparser the sampling is around each point than over the cloud (at least 1):
         :func:`link_scale`. The dense subsets link two points within the link times the smaller
-        of their scales. None links every point at the cloud's link.
+        of their scales where these reach ``link_scale_from`` (:meth:`Context.link_scales`). None
+        links every point at the cloud's link.
     """
 
     points: np.ndarray
@@ -139,10 +140,6 @@ class Preprocessed:
     #: Neighbour tables read so far, by (k, radius) (see :meth:`neighbours_within`); not
     #: carried over by ``dataclasses.replace``, which may change the points.
     _tables: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-
-    def link_scales(self, idx: np.ndarray) -> np.ndarray | None:
-        """The link scales (float32) of the points ``idx``, or None when the cloud has none."""
-        return None if self.link_scale is None else self.link_scale[idx]
 
     def neighbours_within(self, k: int, radius: float, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Each point's ``k`` nearest points within ``radius`` (standard units): their indices

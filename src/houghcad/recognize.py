@@ -177,7 +177,7 @@ def evaluate(fam: Family, prim: Primitive, idx: np.ndarray, ctx: Context, coarse
     bridge = ok if ctx.pre.crease is None else ok | ctx.pre.crease[idx]
     near = np.flatnonzero(bridge & (d < ctx.tau))
     out = []
-    scale = ctx.pre.link_scales(idx[near])
+    scale = ctx.link_scales(idx[near])
     for comp in dense_subsets(P[near], ctx.link, ctx.min_points, t.dense_min_samples, scale):
         loc = near[comp]
         loc = loc[ok[loc]]
@@ -357,7 +357,7 @@ def compete(cands: list[Candidate], ctx: Context) -> list[Candidate]:
             continue
         idx, dd = c.indices[k], c.distances[k]
         for comp in dense_subsets(ctx.pre.points[idx], ctx.link, ctx.min_points,
-                                  ctx.tol.recognition.dense_min_samples, ctx.pre.link_scales(idx)):
+                                  ctx.tol.recognition.dense_min_samples, ctx.link_scales(idx)):
             out.append(Candidate(c.family, c.prim, idx[comp],
                                  mean_fitting_error(dd[comp], ctx.pre.points[idx[comp]]), dd[comp]))
     return out

@@ -32,7 +32,7 @@ def clusters(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
     """DBSCAN clusters (global indices) of the points ``idx``, largest first."""
     if len(idx) < ctx.min_points:
         return []
-    lab = dbscan(ctx.pre.points[idx], ctx.link, ctx.tol.splitting.cluster_min_samples, ctx.pre.link_scales(idx))
+    lab = dbscan(ctx.pre.points[idx], ctx.link, ctx.tol.splitting.cluster_min_samples, ctx.link_scales(idx))
     out = [idx[lab == k] for k in range(lab.max() + 1)]
     out = [c for c in out if len(c) >= ctx.min_points]
     return sorted(out, key=lambda c: (-len(c), int(c[0])))
