@@ -246,7 +246,7 @@ def test_only_clearly_sparser_sampling_lengthens_the_link():
     """Scales under ``link_scale_from`` (random sampling's own variation) link at the cloud's
     link; at or above it, at the point's scale, up to ``link_scale_max``."""
     from houghcad.context import derive_context
-    from houghcad.noise import CLEAN
+    from houghcad.noise import CLEAN, NOISY
     from houghcad.tolerances import Tolerances
 
     cloud = synth.single("plane", n_points=500, seed=0)
@@ -258,6 +258,8 @@ def test_only_clearly_sparser_sampling_lengthens_the_link():
     capped = derive_context(pre, 500, Tolerances.from_dict({"scale.link_scale_max": 2.0}), CLEAN)
     assert np.allclose(capped.link_scales(idx), [1.0, 1.0, 1.0, 1.35, 2.0])
     assert ctx.link_scales(idx[:3]) is None
+    # Under noise the neighbour distances read the noise's spread, not the sampling.
+    assert derive_context(pre, 500, Tolerances(), NOISY).link_scales(idx) is None
 
 
 def test_one_link_for_the_whole_cloud_is_a_link_scale_cap_of_one(monkeypatch):

@@ -93,9 +93,10 @@ class Context:
     def link_scales(self, idx: np.ndarray) -> np.ndarray | None:
         """The link scales (float32) of the points ``idx``: :attr:`Preprocessed.link_scale` where
         it reaches ``link_scale_from``, capped at ``link_scale_max``, else 1; None when every point
-        links at :attr:`link`."""
+        links at :attr:`link` (as under the noisy policy's ``one_link``)."""
         t = self.tol.scale
-        if self.pre.link_scale is None or (t.link_scale_max is not None and t.link_scale_max <= 1.0):
+        if self.pre.link_scale is None or self.policy.one_link or \
+                (t.link_scale_max is not None and t.link_scale_max <= 1.0):
             return None
         s = self.pre.link_scale[idx]
         far = s >= t.link_scale_from
