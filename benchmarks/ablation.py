@@ -75,7 +75,6 @@ SPECIAL_CASES: tuple[tuple[str, dict[str, float]], ...] = (
     ("fillet_alignment", {"fillets.aligned_max_deg": 0.5}),  # short cylinders snapped to a plane's normal
     ("facets", {"consolidation.facet_cover": 1.01}),  # loose curves split into exact planes (chamfered edges)
     ("sampling_gaps", {"association.gap_links": 0.0}),  # parts joined across holes in the sampling
-    ("own_link", {"scale.link_scale_max": 1.0}),  # each point's link from its own sampling
 )
 
 

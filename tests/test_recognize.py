@@ -204,6 +204,7 @@ def test_dbscan_with_scales_links_within_the_smaller_scale(seed: int):
     n = int(rng.integers(2, 250))
     P = np.vstack([rng.normal(size=(n, 3)) * 0.05 + rng.random(3), rng.random((n // 2, 3))])
     scale = rng.uniform(1.0, 3.0, len(P)).astype(np.float32)
+    scale[rng.random(len(P)) < 0.4] = 1.0  # points of the evenly sampled rest
     eps, ms = float(rng.uniform(0.02, 0.2)), int(rng.integers(1, 6))
     D = np.linalg.norm(P[:, None] - P[None], axis=2) / np.minimum(scale[:, None], scale[None]).astype(np.float64)
     want = DBSCAN(eps=eps, min_samples=ms, metric="precomputed").fit_predict(D)
@@ -227,16 +228,20 @@ def test_a_face_sampled_four_times_sparser_on_one_side_is_one_dense_subset():
     assert [len(c) for c in whole] == [5000]
 
 
+#: Each point's own link, up to 4 times the cloud's (the 10:1 thinning reads up to about 3).
+OWN_LINK = {"scale.link_scale_max": 4.0}
+
+
 @pytest.mark.parametrize("make,seed", [("gear_like", 0), ("plate_with_holes", 1), ("filleted_block", 2)])
 def test_a_part_scanned_from_one_side_keeps_one_segment_per_face(make: str, seed: int):
     """Sampled ten times more sparsely at one end than the other (as a scan sees a part from one
-    side), every face is one segment. At the cloud's one link the sparse end's faces came out
-    in 1-5 extra pieces here."""
+    side), every face is one segment with each point's own link (``link_scale_max`` above 1; off
+    by default). At the cloud's one link the sparse end's faces came out in 1-5 extra pieces here."""
     from houghcad.evaluate import classification_measures
     from houghcad.synth.perturb import Perturbation, perturb
 
     cloud = perturb(getattr(synth, make)(n_points=6000, seed=seed), Perturbation(uneven=0.9), seed=seed)
-    res = Segmenter(n_jobs=1).fit(cloud.points).result_
+    res = Segmenter(n_jobs=1, tolerances=OWN_LINK).fit(cloud.points).result_
     faces = [np.asarray(f) for f in res.faces()]
     assert len(faces) == len(cloud.segments())
     assert classification_measures(faces, cloud.segments(), len(cloud.points))["DSC"] > 0.97
@@ -253,23 +258,25 @@ def test_only_clearly_sparser_sampling_lengthens_the_link():
     pre = preprocess(cloud.points)
     pre = replace(pre, link_scale=np.array([1.0, 1.2, 1.25, 1.35, 3.0], np.float32).repeat(100))
     idx = np.arange(0, 500, 100)
-    ctx = derive_context(pre, 500, Tolerances(), CLEAN)
+    ctx = derive_context(pre, 500, Tolerances.from_dict(OWN_LINK), CLEAN)
     assert np.allclose(ctx.link_scales(idx), [1.0, 1.0, 1.0, 1.35, 3.0])
     capped = derive_context(pre, 500, Tolerances.from_dict({"scale.link_scale_max": 2.0}), CLEAN)
     assert np.allclose(capped.link_scales(idx), [1.0, 1.0, 1.0, 1.35, 2.0])
     assert ctx.link_scales(idx[:3]) is None
     # Under noise the neighbour distances read the noise's spread, not the sampling.
-    assert derive_context(pre, 500, Tolerances(), NOISY).link_scales(idx) is None
+    assert derive_context(pre, 500, Tolerances.from_dict(OWN_LINK), NOISY).link_scales(idx) is None
+    # One link for the cloud by default.
+    assert derive_context(pre, 500, Tolerances(), CLEAN).link_scales(idx) is None
 
 
-def test_one_link_for_the_whole_cloud_is_a_link_scale_cap_of_one(monkeypatch):
-    """``link_scale_max = 1`` links every point at the cloud's link, as a cloud without scales does:
-    the sparse end of the part scanned from one side then comes out in extra pieces."""
+def test_one_link_for_the_whole_cloud_is_the_default(monkeypatch):
+    """By default (``link_scale_max = 1``) every point links at the cloud's link, as in a cloud
+    without scales: the sparse end of the part scanned from one side comes out in extra pieces."""
     import houghcad.preprocess as preprocess_module
     from houghcad.synth.perturb import Perturbation, perturb
 
     cloud = perturb(synth.gear_like(n_points=6000, seed=0), Perturbation(uneven=0.9), seed=0)
-    capped = Segmenter(n_jobs=1, tolerances={"scale.link_scale_max": 1}).fit(cloud.points).result_.faces()
+    capped = Segmenter(n_jobs=1).fit(cloud.points).result_.faces()
     monkeypatch.setattr(preprocess_module, "link_scale", lambda dist, nbr: None)
     none = Segmenter(n_jobs=1).fit(cloud.points).result_.faces()
     assert [list(f) for f in capped] == [list(f) for f in none]

@@ -95,15 +95,13 @@ class Context:
         it reaches ``link_scale_from``, capped at ``link_scale_max``, else 1; None when every point
         links at :attr:`link` (as under the noisy policy's ``one_link``)."""
         t = self.tol.scale
-        if self.pre.link_scale is None or self.policy.one_link or \
-                (t.link_scale_max is not None and t.link_scale_max <= 1.0):
+        if self.pre.link_scale is None or self.policy.one_link or t.link_scale_max <= 1.0:
             return None
         s = self.pre.link_scale[idx]
         far = s >= t.link_scale_from
         if not far.any():
             return None
-        s = np.where(far, s, np.float32(1.0))
-        return s if t.link_scale_max is None else np.minimum(s, np.float32(t.link_scale_max))
+        return np.minimum(np.where(far, s, np.float32(1.0)), np.float32(t.link_scale_max))
 
 
 def threads(ctx: Context) -> int:

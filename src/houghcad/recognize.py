@@ -72,14 +72,22 @@ def dbscan(P: np.ndarray, eps: float, min_samples: int, scale: np.ndarray | None
 
 
 def _pairs(P: np.ndarray, eps: float, scale: np.ndarray | None) -> np.ndarray:
-    """Index pairs (m, 2), i < j, of the points of P (n, 3) within ``eps`` times the smaller of
-    their ``scale`` (n,), or within ``eps`` when there is no scale."""
-    top = 1.0 if scale is None or not len(scale) else float(scale.max())
-    pairs = cKDTree(P).query_pairs(eps * top, output_type="ndarray")
-    if top > 1.0 and len(pairs):
-        d = np.linalg.norm(P[pairs[:, 0]] - P[pairs[:, 1]], axis=1)
-        pairs = pairs[d <= eps * np.minimum(scale[pairs[:, 0]], scale[pairs[:, 1]])]
-    return pairs
+    """Index pairs (m, 2) of the points of P (n, 3) within ``eps`` times the smaller of their
+    ``scale`` (n,), or within ``eps`` when there is no scale.
+
+    A pair farther than ``eps`` has both scales above 1, so only those points are searched
+    farther: on a cloud with a few sparse regions or scattered outliers, one search of all points
+    at the largest scale would return the dense faces' pairs many times over."""
+    pairs = cKDTree(P).query_pairs(eps, output_type="ndarray")
+    far = np.flatnonzero(scale > 1.0) if scale is not None else np.empty(0, np.int64)
+    if len(far) < 2:
+        return pairs
+    sub = cKDTree(P[far]).query_pairs(eps * float(scale[far].max()), output_type="ndarray")
+    i, j = far[sub[:, 0]], far[sub[:, 1]]
+    d = np.linalg.norm(P[i] - P[j], axis=1)
+    keep = d <= eps * np.minimum(scale[i], scale[j])
+    # The union: the pairs within eps are in both searches.
+    return np.unique(np.vstack([pairs, np.c_[i[keep], j[keep]]]), axis=0)
 
 
 # Union-find in numba instead of scipy's connected_components: the recognition clusters thousands
