@@ -452,7 +452,7 @@ def test_link_scale_reads_how_much_sparser_the_sampling_is_around_each_point():
     1 on the dense half, and never below 1."""
     rng = np.random.default_rng(1)
     xy = np.vstack([rng.random((6000, 2)) * [0.5, 1.0], rng.random((1500, 2)) * [0.5, 1.0] + [0.5, 0.0]])
-    pre = preprocess(np.c_[xy, np.zeros(len(xy))])
+    pre = preprocess(np.c_[xy, np.zeros(len(xy))], sampling_scales=True)
     s = pre.link_scale
     assert s.dtype == np.float32 and s.shape == (len(xy),) and s.min() >= 1.0
     assert np.median(s[:6000][xy[:6000, 0] < 0.4]) == 1.0
@@ -461,7 +461,7 @@ def test_link_scale_reads_how_much_sparser_the_sampling_is_around_each_point():
 
 def test_link_scale_is_one_on_even_sampling_and_chunked_the_same(monkeypatch):
     cloud = synth.single("sphere", n_points=3000, seed=0)
-    pre = preprocess(cloud.points)
+    pre = preprocess(cloud.points, sampling_scales=True)
     assert np.percentile(pre.link_scale, 90) < 1.3
     dist, nbr = pre.tree.query(pre.points, k=16)
     whole = preprocess_module.link_scale(dist, nbr)

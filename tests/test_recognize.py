@@ -220,7 +220,7 @@ def test_a_face_sampled_four_times_sparser_on_one_side_is_one_dense_subset():
 
     rng = np.random.default_rng(0)
     xy = np.vstack([rng.random((4000, 2)) * [0.5, 1.0], rng.random((1000, 2)) * [0.5, 1.0] + [0.5, 0.0]])
-    pre = preprocess(np.c_[xy, np.zeros(len(xy))])
+    pre = preprocess(np.c_[xy, np.zeros(len(xy))], sampling_scales=True)
     t = houghcad.Tolerances().scale
     link = max(t.link_spacings * pre.spacing, t.link_reach * pre.reach)
     assert len(dense_subsets(pre.points, link, 6, 3)) > 5

@@ -383,7 +383,7 @@ class Segmenter:
         report("preprocess", 0.0)
         jobs = resolve_jobs(self.n_jobs)
         pre = preprocess(work, work_normals, method=self.normals_method, seed=self.seed, noise=self.noise,
-                         workers=jobs)
+                         workers=jobs, sampling_scales=tol.scale.link_scale_max > 1.0)
         ctx = self._context(pre, len(work), tol)
         timing["preprocess"] = time.perf_counter() - t0
         t0 = time.perf_counter()

@@ -122,7 +122,7 @@ class Preprocessed:
         How much sparser the sampling is around each point than over the cloud (at least 1):
         :func:`link_scale`. The dense subsets link two points within the link times the smaller
         of their scales where these reach ``link_scale_from`` (:meth:`Context.link_scales`). None
-        links every point at the cloud's link.
+        (not read: :func:`preprocess`'s ``sampling_scales``) links every point at the cloud's link.
     """
 
     points: np.ndarray
@@ -185,7 +185,8 @@ EXACT_QUADRUPLE_SPACINGS = 0.002
 
 
 def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: str = "auto",
-               k: int = 16, seed: int = 0, noise: str = "auto", workers: int = 1) -> Preprocessed:
+               k: int = 16, seed: int = 0, noise: str = "auto", workers: int = 1,
+               sampling_scales: bool = False) -> Preprocessed:
     """Put a world cloud in standard position and estimate its normals.
 
     Parameters
@@ -211,6 +212,9 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     workers : int
         Threads for the neighbour queries and the per-point fits (the result does not depend
         on it).
+    sampling_scales : bool
+        Also read each point's sampling scale (:attr:`Preprocessed.link_scale`, None otherwise):
+        only the own link (``scale.link_scale_max`` above 1) uses it.
     """
     noise_policy = noise
     points = np.asarray(points, dtype=np.float64)
@@ -229,7 +233,7 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     diag = float(np.linalg.norm(np.ptp(x, axis=0)))
     return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
                         noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2, crease=crease,
-                        exact=hood.exact, link_scale=link_scale(hood.dist, hood.nbr))
+                        exact=hood.exact, link_scale=link_scale(hood.dist, hood.nbr) if sampling_scales else None)
 
 
 #: Rows per chunk of :func:`link_scale`'s gather: bounds its (rows, k) temporaries.
