@@ -467,3 +467,15 @@ def test_link_scale_is_one_on_even_sampling_and_chunked_the_same(monkeypatch):
     whole = preprocess_module.link_scale(dist, nbr)
     monkeypatch.setattr(preprocess_module, "LINK_SCALE_CHUNK", 7)
     assert np.array_equal(preprocess_module.link_scale(dist, nbr), whole)
+
+
+def test_off_surface_tells_scattered_points_from_a_sparse_face():
+    """A local quadric explains a face's neighbourhoods at any density (about 0), not those of
+    points scattered in space (0.1-0.3 of the neighbourhood's radius)."""
+    rng = np.random.default_rng(2)
+    xy = rng.random((600, 2))
+    sparse = preprocess(np.c_[xy, 0.3 * (xy[:, 0] - 0.5) ** 2], sampling_scales=True)
+    assert sparse.off_surface.dtype == np.float32 and np.quantile(sparse.off_surface, 0.99) < 0.01
+    scattered = preprocess(rng.random((600, 3)), sampling_scales=True)
+    assert np.quantile(scattered.off_surface, 0.01) > 0.08
+    assert preprocess(rng.random((600, 3))).off_surface is None

@@ -93,7 +93,10 @@ class Context:
     def link_scales(self, idx: np.ndarray) -> np.ndarray | None:
         """The link scales (float32) of the points ``idx``: :attr:`Preprocessed.link_scale` where
         it reaches ``link_scale_from``, capped at ``link_scale_max``, else 1; None when every point
-        links at :attr:`link` (as under the noisy policy's ``one_link``)."""
+        links at :attr:`link` (as under the noisy policy's ``one_link``). The scale of a point whose
+        neighbourhood no surface explains (``link_off_surface_max``: a scattered outlier, or a
+        point beside a crease) is negative: :func:`houghcad.recognize.dbscan` links two such
+        points at the cloud's link only."""
         t = self.tol.scale
         if self.pre.link_scale is None or self.policy.one_link or t.link_scale_max <= 1.0:
             return None
@@ -101,7 +104,10 @@ class Context:
         far = s >= t.link_scale_from
         if not far.any():
             return None
-        return np.minimum(np.where(far, s, np.float32(1.0)), np.float32(t.link_scale_max))
+        s = np.minimum(np.where(far, s, np.float32(1.0)), np.float32(t.link_scale_max))
+        if self.pre.off_surface is not None:
+            s = np.where(far & (self.pre.off_surface[idx] > t.link_off_surface_max), -s, s)
+        return s
 
 
 def threads(ctx: Context) -> int:

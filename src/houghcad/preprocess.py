@@ -123,6 +123,10 @@ class Preprocessed:
         :func:`link_scale`. The dense subsets link two points within the link times the smaller
         of their scales where these reach ``link_scale_from`` (:meth:`Context.link_scales`). None
         (not read: :func:`preprocess`'s ``sampling_scales``) links every point at the cloud's link.
+    off_surface : ndarray of float32, shape (n,), or None
+        RMS residual of a local quadric through each point's 16-neighbourhood, over the
+        neighbourhood's radius (:func:`off_surface`; 0 on a smooth face, 0.15-0.3 for a point
+        scattered in space). Read with ``link_scale``: only points on a surface link farther.
     """
 
     points: np.ndarray
@@ -137,6 +141,7 @@ class Preprocessed:
     crease: np.ndarray | None = None
     exact: bool = False
     link_scale: np.ndarray | None = None
+    off_surface: np.ndarray | None = None
     #: Neighbour tables read so far, by (k, radius) (see :meth:`neighbours_within`); not
     #: carried over by ``dataclasses.replace``, which may change the points.
     _tables: dict = field(default_factory=dict, init=False, repr=False, compare=False)
@@ -233,7 +238,8 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
     diag = float(np.linalg.norm(np.ptp(x, axis=0)))
     return Preprocessed(points=x, normals=nrm, transform=T, tree=tree, spacing=spacing * s2,
                         noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2, crease=crease,
-                        exact=hood.exact, link_scale=link_scale(hood.dist, hood.nbr) if sampling_scales else None)
+                        exact=hood.exact, link_scale=link_scale(hood.dist, hood.nbr) if sampling_scales else None,
+                        off_surface=off_surface(hood.dist, hood.qres) if sampling_scales else None)
 
 
 #: Rows per chunk of :func:`link_scale`'s gather: bounds its (rows, k) temporaries.
@@ -263,6 +269,24 @@ def link_scale(dist: np.ndarray, nbr: np.ndarray) -> np.ndarray:
         local = np.median(d6[nbr[a:a + LINK_SCALE_CHUNK]], axis=1)
         out[a:a + LINK_SCALE_CHUNK] = np.maximum(local / ref, 1.0)
     return out
+
+
+def off_surface(dist: np.ndarray, qres: np.ndarray | None) -> np.ndarray | None:
+    """How far each point's neighbourhood is from a surface: float32 (n,), or None without ``qres``.
+
+    ``dist`` (n, k) are the k nearest distances, ``qres`` (n,) the RMS residuals of a local quadric
+    through the same neighbourhoods (:func:`houghcad.normals.quadric_residuals`). Their ratio to
+    the neighbourhood's radius is scale-free: about 0 on a smooth face at any sampling density, a
+    few hundredths where a neighbourhood straddles a crease, and 0.1-0.3 for points scattered in
+    space (uniform outliers), whose neighbourhoods no surface explains. Sparse outliers read as
+    sparse sampling too (:func:`link_scale`); this tells them from a face sampled sparsely.
+    """
+    if qres is None:
+        return None
+    r = dist[:, -1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.where(r > 0, qres / r, 0.0)
+    return out.astype(np.float32)
 
 
 def _unit_cube(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:

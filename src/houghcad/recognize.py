@@ -27,10 +27,12 @@ def dbscan(P: np.ndarray, eps: float, min_samples: int, scale: np.ndarray | None
     """DBSCAN labels (n,) of P (n, 3), -1 for noise: the same labels as
     ``sklearn.cluster.DBSCAN(eps, min_samples=min_samples).fit_predict(P)``.
 
-    With ``scale`` (n,) (:attr:`Preprocessed.link_scale`), points i and j are neighbours
-    within ``eps * min(scale[i], scale[j])``: a sparsely sampled face links at its own spacing,
-    and where it meets a dense one the dense side's link holds. Without it, or with every
-    scale 1, the labels are scikit-learn's.
+    With ``scale`` (n,) (:meth:`Context.link_scales`), points i and j are neighbours within
+    ``eps * min(|scale[i]|, |scale[j]|)``: a sparsely sampled face links at its own spacing, and
+    where it meets a dense one the dense side's link holds. A negative scale marks a point whose
+    neighbourhood no surface explains: two such points link within ``eps`` only, so that points
+    scattered in space never chain among themselves, while a sparse face's points beside a crease
+    still link to the face. Without it, or with every scale 1, the labels are scikit-learn's.
 
     Written here because the recognition clusters thousands of small inlier
     sets per cloud, where scikit-learn's per-call validation and neighbour
@@ -73,19 +75,21 @@ def dbscan(P: np.ndarray, eps: float, min_samples: int, scale: np.ndarray | None
 
 def _pairs(P: np.ndarray, eps: float, scale: np.ndarray | None) -> np.ndarray:
     """Index pairs (m, 2) of the points of P (n, 3) within ``eps`` times the smaller of their
-    ``scale`` (n,), or within ``eps`` when there is no scale.
+    ``|scale|`` (n,), unless both scales are negative, or within ``eps`` when there is no scale
+    (see :func:`dbscan`).
 
-    A pair farther than ``eps`` has both scales above 1, so only those points are searched
+    A pair farther than ``eps`` has both scales above 1 in size, so only those points are searched
     farther: on a cloud with a few sparse regions or scattered outliers, one search of all points
     at the largest scale would return the dense faces' pairs many times over."""
     pairs = cKDTree(P).query_pairs(eps, output_type="ndarray")
-    far = np.flatnonzero(scale > 1.0) if scale is not None else np.empty(0, np.int64)
+    size = np.abs(scale) if scale is not None else None
+    far = np.flatnonzero(size > 1.0) if size is not None else np.empty(0, np.int64)
     if len(far) < 2:
         return pairs
-    sub = cKDTree(P[far]).query_pairs(eps * float(scale[far].max()), output_type="ndarray")
+    sub = cKDTree(P[far]).query_pairs(eps * float(size[far].max()), output_type="ndarray")
     i, j = far[sub[:, 0]], far[sub[:, 1]]
     d = np.linalg.norm(P[i] - P[j], axis=1)
-    keep = d <= eps * np.minimum(scale[i], scale[j])
+    keep = (d <= eps * np.minimum(size[i], size[j])) & ((scale[i] > 0) | (scale[j] > 0))
     # The union: the pairs within eps are in both searches.
     return np.unique(np.vstack([pairs, np.c_[i[keep], j[keep]]]), axis=0)
 

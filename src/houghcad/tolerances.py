@@ -57,14 +57,22 @@ class ScaleTolerances:
                                  "link, 0.9320 here, uncapped (at 1.5: 0.9311); full density and 35 % unchanged. At 1 "
                                  "(no threshold) 35 % gained 2.0 thousandths on every fold, but a disc with "
                                  "both rim edges rounded lost 0.037 on the synthetic parts")
-    link_scale_max: float = tol(1.0, "links", "a point links at most this many times the cloud's link where the "
-                                "sampling around it is clearly sparser; 1 (one link for the cloud) until scattered "
-                                "outliers are told from sparse faces: they read as sparse sampling too (3.7-5), "
-                                "and linked they form clusters that the splitting phase searches (30 % outliers on "
-                                "a synthetic part: splitting 0.14 -> 5.4 s, the same faces). Uncapped on Fit4CAD "
-                                "thinned 10:1 across each part: 0.9263 -> 0.9320, predicted / true faces at the "
-                                "90th percentile 1.59 -> 1.33; full density and 35 % unchanged; in the dense "
-                                "subsets of candidates alone, without the splitting phase's clusters, +0.2 only")
+    link_scale_max: float = tol(4.0, "links", "a point links at most this many times the cloud's link where the "
+                                "sampling around it is clearly sparser: a scan's faces turned away read 2-3, "
+                                "Fit4CAD thinned 10:1 across each part up to 3.2; the cap bounds the pair search, "
+                                "whose neighbours grow as its square. 1 gives one link for the cloud. Fit4CAD "
+                                "thinned 10:1: 0.9263 -> 0.9307 (folds +4.8 / +6.8 / -2.7 / +5.7 / +7.5 "
+                                "thousandths), predicted / true faces at the 90th percentile 1.59 -> 1.46; full "
+                                "density identical on every cloud")
+    link_off_surface_max: float = tol(0.1, "neighbourhood radii", "a point whose 16 neighbours no local quadric fits "
+                                      "within this RMS (`Preprocessed.off_surface`) links farther only to points "
+                                      "that one fits: uniform outliers read as sparse sampling too (3.7-5) and "
+                                      "read 0.08-0.13 here at their 1st percentile (synthetic parts, 5-30 % "
+                                      "outliers), so they do not chain among themselves (linked, the splitting "
+                                      "phase searched their clusters: 30 % outliers, 2-3 times the time); a sparse "
+                                      "face's points read 0.02 at their median, more beside an edge, and still "
+                                      "link to the face. As a cut of the scale alone (0.9299), a hole's rim came "
+                                      "apart from its sparse hole")
     cell_spacings: float = tol(0.5, "spacings", "accumulator cell for lengths: finer than the sampling resolves "
                                "only splits the votes")
     min_points_floor: int = tol(6, "points", "smallest segment: the fewest points that still show a misfit of "
