@@ -125,8 +125,9 @@ class Preprocessed:
         (not read: :func:`preprocess`'s ``sampling_scales``) links every point at the cloud's link.
     off_surface : ndarray of float32, shape (n,), or None
         RMS residual of a local quadric through each point's 16-neighbourhood, over the
-        neighbourhood's radius (:func:`off_surface`; 0 on a smooth face, 0.15-0.3 for a point
-        scattered in space). Read with ``link_scale``: only points on a surface link farther.
+        neighbourhood's radius (:func:`off_surface`; 0 on a smooth face, 0.1-0.3 for a point
+        scattered in space). Read with ``link_scale``: two points off every surface never link
+        farther than the cloud's link (:meth:`Context.link_scales`).
     """
 
     points: np.ndarray
