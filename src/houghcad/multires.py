@@ -196,7 +196,7 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
         seg.parts = [_pieces(seg.indices(s), parts_full) for s in range(len(sub))]
     seg.groups = list(sub.groups)
     return FullResolution(seg=seg, pre=replace(pre, points=x, normals=nrm, crease=None, link_scale=None,
-                                                    off_surface=None))
+                                               off_surface=None))
 
 
 def _chunk_normals(x: np.ndarray, a: int, lab: np.ndarray, nearest: np.ndarray, given: np.ndarray | None,

@@ -219,8 +219,9 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
         Threads for the neighbour queries and the per-point fits (the result does not depend
         on it).
     sampling_scales : bool
-        Also read each point's sampling scale (:attr:`Preprocessed.link_scale`, None otherwise):
-        only the own link (``scale.link_scale_max`` above 1) uses it.
+        Also read each point's sampling scale and how far its neighbourhood is from a surface
+        (:attr:`Preprocessed.link_scale` and :attr:`Preprocessed.off_surface`, None otherwise):
+        only the own link (``scale.link_scale_max`` above 1) uses them.
     """
     noise_policy = noise
     points = np.asarray(points, dtype=np.float64)
