@@ -10,8 +10,8 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src" / "houghcad"
 #: The modules of the pipeline after preprocessing: every threshold there is a
 #: named tolerance (houghcad.tolerances) or a named module constant.
-PIPELINE_MODULES = ("recognize", "splitting", "ransac", "growth", "boundaries", "adjacency", "consolidation", "planes",
-                    "blend", "associate", "pipeline", "output", "context", "state", "noise")
+PIPELINE_MODULES = ("recognize", "clusters", "splitting", "ransac", "growth", "boundaries", "adjacency", "consolidation",
+                    "planes", "scales", "blend", "associate", "pipeline", "output", "context", "state", "noise")
 #: Literals that are not thresholds: nothing, one, two (halves, pairs, squares),
 #: minus one, and three (the dimension of space, in array shapes).
 PLAIN = {0, 1, 2, -1, 3}
@@ -22,8 +22,8 @@ def _modules() -> list[Path]:
 
 
 @pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(SRC)))
-def test_no_module_over_600_lines(path):
-    assert len(path.read_text().splitlines()) <= 600
+def test_no_module_over_550_lines(path):
+    assert len(path.read_text().splitlines()) <= 550
 
 
 @pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(SRC)))

@@ -21,7 +21,8 @@ from .families import Family
 from .bridges import row_axis
 from .families.base import Primitive, axial, unit
 from .preprocess import rotation_to_z
-from .recognize import dense_subsets, select
+from .clusters import dense_subsets
+from .recognize import select
 from .state import Candidate, Segmentation, mean_fitting_error
 
 

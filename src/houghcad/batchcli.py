@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .batch import OUTPUT_NAMES, BatchRow
-from .cli import _positive_int, _seed, add_segment_options, read_kwargs, segment_kwargs
+from .cliopts import add_segment_options, non_negative_int, positive_int, read_kwargs, segment_kwargs
 from .errors import InputError
 
 __all__ = ["add_batch_parser", "Progress"]
@@ -48,9 +48,9 @@ def add_batch_parser(sub: Any) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="address of a running Dask scheduler, e.g. tcp://host:8786; its workers must reach the "
                    "INPUT and OUTDIR paths (default: start a local cluster)")
-    p.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+    p.add_argument("--workers", type=positive_int, default=None, metavar="N",
                    help="worker processes of the local cluster (default: one per core)")
-    p.add_argument("--retries", type=_seed, default=2, metavar="N",
+    p.add_argument("--retries", type=non_negative_int, default=2, metavar="N",
                    help="extra attempts for a cloud whose worker died (local cluster) or that hit an I/O error "
                    "(default: 2)")
     p.add_argument("--timeout", type=_seconds, default=None, metavar="SECONDS",

@@ -12,7 +12,6 @@ import contextlib
 import gc
 import importlib.resources
 import json
-import math
 import os
 import shutil
 import sys
@@ -21,6 +20,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from . import __version__
+from .cliopts import add_segment_options, parse_tolerances, positive_int, read_kwargs, segment_kwargs
 from .errors import InputError
 from .io import PointCloud, read_points, write_fit4cad_primitives, write_json
 from .report import summary_table
@@ -40,115 +40,6 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         raise _UsageError(f"{message} (see '{self.prog} --help')")
-
-
-# --------------------------------------------------------------------------- argument types
-
-
-def _number_in(text: str, hi: float, what: str) -> float:
-    """``text`` as a finite number in (0, hi); otherwise an argparse error saying ``what`` it must be."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and 0.0 < value < hi):
-        raise argparse.ArgumentTypeError(f"{text} is not {what}")
-    return value
-
-
-def _fraction(text: str) -> float:
-    """``--epsilon``: a fraction of the bounding-box diagonal, 0 < F < 0.5 (as Segmenter)."""
-    return _number_in(text, 0.5, "a fraction of the diagonal in (0, 0.5), e.g. 0.01")
-
-
-def _open_fraction(text: str) -> float:
-    """``--persistence``: a number in (0, 1)."""
-    return _number_in(text, 1.0, "in (0, 1)")
-
-
-def _seed(text: str) -> int:
-    """``--seed``: a non-negative integer (numpy's requirement)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    """``--min-points``: an integer >= 1."""
-    value = _seed(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
-# --------------------------------------------------------------------------- parser
-
-
-def add_segment_options(p: argparse.ArgumentParser) -> None:
-    """The options that shape a result, shared by ``segment`` and ``batch``."""
-    p.add_argument("--families", default="simple", metavar="LIST",
-                   help="'simple', 'all' or comma-separated names, e.g. plane,cylinder (default: simple)")
-    p.add_argument("--family-file", action="append", default=[], metavar="FILE.py",
-                   help="run a Python file that defines families with houghcad.define_family before segmenting "
-                   "(repeatable; it runs unsandboxed: only files you trust); name them in --families")
-    p.add_argument("--epsilon", type=_fraction, default=None, metavar="F",
-                   help="distance tolerance as a fraction of the bounding-box diagonal, below 0.5 "
-                   "(default: from the point spacing and the estimated noise)")
-    p.add_argument("--seed", type=_seed, default=0, metavar="N", help="random seed (default: 0)")
-    p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
-                   help="normals: 'auto' uses the file's normals if any, else PCA (creases voted on clean clouds, "
-                   "up to 64 neighbours on noisy ones); 'pca' and 'voting' always estimate them (default: auto)")
-    p.add_argument("--no-merge", action="store_true",
-                   help="keep segments lying on one surface apart instead of merging them into one "
-                   "maximal primitive (groups are found either way)")
-    p.add_argument("--noise", choices=("auto", "clean", "noisy"), default="auto",
-                   help="noise policy: 'auto' reads the cloud as noisy when its estimated noise is at least 0.15 "
-                   "point spacings; 'clean' and 'noisy' force it (default: auto)")
-    p.add_argument("--persistence", type=_open_fraction, default=None, metavar="F",
-                   help="peak persistence threshold, a fraction of the accumulator's maximum in (0, 1) (default: 0.1)")
-    p.add_argument("--min-points", type=_positive_int, default=None, metavar="N",
-                   help="smallest segment in points (default: a patch 1.5 %% of the diagonal wide, at least 6, "
-                        "8 on noisy clouds)")
-    p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
-                   help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
-                   "docs/tolerances.md lists them")
-    p.add_argument("--max-points", type=_positive_int, default=None, metavar="N",
-                   help="clouds with more points are recognised on an even subsample of at most N points, then "
-                   "every point is labelled from its subsample neighbours (default: 100000; at least 1000)")
-    p.add_argument("--full-resolution", action="store_true",
-                   help="recognise on every point, however many (slow and memory-hungry on big scans)")
-    p.add_argument("--scan", type=_seed, default=None, metavar="K",
-                   help="E57 input: segment scan K only (0-based; default: every scan, merged in the file's frame)")
-    p.add_argument("--drop-invalid", action="store_true",
-                   help="leave out points with a NaN or infinite coordinate (scanners mark missing points so) "
-                   "instead of refusing the file, and say how many")
-
-
-def segment_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """Keyword arguments of :func:`_run_segmentation` from the options of
-    :func:`add_segment_options` (a bad ``--tolerance`` is an InputError)."""
-    kwargs: dict[str, Any] = {"families": args.families, "epsilon": args.epsilon, "seed": args.seed,
-                              "normals_method": args.normals, "merge": not args.no_merge, "noise": args.noise}
-    if args.persistence is not None:
-        kwargs["persistence"] = args.persistence
-    if args.min_points is not None:
-        kwargs["min_points"] = args.min_points
-    if args.tolerance:
-        kwargs["tolerances"] = _tolerances(args.tolerance)
-    if args.max_points is not None:
-        kwargs["max_points"] = args.max_points
-    if args.full_resolution:
-        kwargs["full_resolution"] = True
-    return kwargs
-
-
-def read_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """Keyword arguments of :func:`houghcad.io.read_points` from :func:`add_segment_options`."""
-    return {"scan": args.scan, "drop_invalid": args.drop_invalid}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -179,7 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--trace", metavar="DIR",
                    help="also write the labels after every pass of the pipeline, one PLY per pass named "
                    "NN_PASS.ply, to see where a cloud goes wrong (DIR is created if needed)")
-    p.add_argument("--jobs", type=_positive_int, default=None, metavar="N",
+    p.add_argument("--jobs", type=positive_int, default=None, metavar="N",
                    help="processes for the independent work of the run (families, clusters); the result is the "
                    "same for every N (default: every available core)")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors (and no progress bar)")
@@ -323,24 +214,6 @@ def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | N
     return written
 
 
-def _tolerances(items: Sequence[str]) -> dict[str, float]:
-    """``["stage.name=value", ...]`` as ``{"stage.name": value}``, checked
-    (a bad one is a one-line InputError before the cloud is read)."""
-    from .tolerances import Tolerances
-
-    out: dict[str, float] = {}
-    for item in items:
-        name, sep, text = item.partition("=")
-        try:
-            if not sep:
-                raise ValueError("expected STAGE.NAME=VALUE")
-            out[name.strip()] = float(text)
-            Tolerances.from_dict(out)
-        except ValueError as exc:
-            raise InputError(f"--tolerance {item}: {exc}") from None
-    return out
-
-
 def _trace_writer(directory: Path, points: Any) -> Callable[[int, str, Any], None]:
     """A ``trace(step, pass_name, state)`` callback writing ``directory/NN_PASS.ply``
     (the directory is created now, before the run)."""
@@ -399,7 +272,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 
         _load_family_files(args.family_file)
         select(args.families)  # unknown names fail now, not after reading the cloud
-    _tolerances(args.tolerance)  # a bad one fails before the cloud is read
+    parse_tolerances(args.tolerance)  # a bad one fails before the cloud is read
     cloud = read_points(inp, **read_kwargs(args))
     if cloud.dropped and not args.quiet:
         print(f"{PROG}: {inp}: left out {cloud.dropped} points with a NaN or infinite coordinate",

@@ -95,7 +95,7 @@ class Context:
         it reaches ``link_scale_from``, capped at ``link_scale_max``, else 1; None when every point
         links at :attr:`link` (as under the noisy policy's ``one_link``). The scale of a point whose
         neighbourhood no surface explains (``link_off_surface_max``: a scattered outlier, or a
-        point beside a crease) is negative: :func:`houghcad.recognize.dbscan` links two such
+        point beside a crease) is negative: :func:`houghcad.clusters.dbscan` links two such
         points at the cloud's link only."""
         t = self.tol.scale
         if self.pre.link_scale is None or self.policy.one_link or t.link_scale_max <= 1.0:

@@ -14,10 +14,10 @@ from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .hough import direction_accumulator, refine_direction
-
 from .noise import NOISY_SPACINGS
 from .noise import choose as choose_policy
 from .normals import ROWS, by_rows, pca_normals, quadric_residuals, voting_normals
+from .scales import link_scale, off_surface
 
 __all__ = ["ROWS", "Preprocessed", "Similarity", "by_rows", "pca_normals", "preprocess", "quadric_residuals",
            "rotation_to_z", "voting_normals"]
@@ -120,14 +120,15 @@ class Preprocessed:
         give): ``noise`` then reads curvature and thin features, not a scatter of the points.
     link_scale : ndarray of float32, shape (n,), or None
         How much sparser the sampling is around each point than over the cloud (at least 1):
-        :func:`link_scale`. The dense subsets link two points within the link times the smaller
-        of their scales where these reach ``link_scale_from`` (:meth:`Context.link_scales`). None
-        (not read: :func:`preprocess`'s ``sampling_scales``) links every point at the cloud's link.
+        :func:`houghcad.scales.link_scale`. The dense subsets link two points within the link
+        times the smaller of their scales where these reach ``link_scale_from``
+        (:meth:`Context.link_scales`). None (not read: :func:`preprocess`'s ``sampling_scales``)
+        links every point at the cloud's link.
     off_surface : ndarray of float32, shape (n,), or None
         RMS residual of a local quadric through each point's 16-neighbourhood, over the
-        neighbourhood's radius (:func:`off_surface`; 0 on a smooth face, 0.1-0.3 for a point
-        scattered in space). Read with ``link_scale``: two points off every surface never link
-        farther than the cloud's link (:meth:`Context.link_scales`).
+        neighbourhood's radius (:func:`houghcad.scales.off_surface`; 0 on a smooth face, 0.1-0.3
+        for a point scattered in space). Read with ``link_scale``: two points off every surface
+        never link farther than the cloud's link (:meth:`Context.link_scales`).
     """
 
     points: np.ndarray
@@ -242,53 +243,6 @@ def preprocess(points: np.ndarray, normals: np.ndarray | None = None, method: st
                         noise=noise * s2, diagonal=diag, normals_method=used, reach=reach * s2, crease=crease,
                         exact=hood.exact, link_scale=link_scale(hood.dist, hood.nbr) if sampling_scales else None,
                         off_surface=off_surface(hood.dist, hood.qres) if sampling_scales else None)
-
-
-#: Rows per chunk of :func:`link_scale`'s gather: bounds its (rows, k) temporaries.
-LINK_SCALE_CHUNK = 1 << 18
-
-
-def link_scale(dist: np.ndarray, nbr: np.ndarray) -> np.ndarray:
-    """Each point's sampling scale relative to the cloud's, at least 1: float32 (n,).
-
-    ``dist`` and ``nbr`` (n, k) are each point's k nearest distances and indices, itself first.
-    A point's scale is the median, over its neighbourhood, of the 6th-neighbour distance,
-    divided by the cloud's median 6th-neighbour distance. A scan sees a part from one side:
-    the faces turned away or farther off are sampled several times more sparsely, and a
-    cloud-wide link, set by the median spacing, cuts such a face into fragments too small to
-    stand as segments. The neighbourhood's median, not the point's own distance, so that one
-    gap (a crease, a hole's rim) does not read as sparse sampling. Never below 1: where the
-    sampling is denser than the median the cloud's link already connects it, and a shorter
-    link would split the noise-spread points of a dense face.
-    """
-    n, k = dist.shape
-    d6 = dist[:, min(6, k - 1)].astype(np.float32)
-    ref = float(np.median(d6)) if n else 0.0
-    out = np.ones(n, np.float32)
-    if ref <= 0 or not np.isfinite(ref):
-        return out
-    for a in range(0, n, LINK_SCALE_CHUNK):
-        local = np.median(d6[nbr[a:a + LINK_SCALE_CHUNK]], axis=1)
-        out[a:a + LINK_SCALE_CHUNK] = np.maximum(local / ref, 1.0)
-    return out
-
-
-def off_surface(dist: np.ndarray, qres: np.ndarray | None) -> np.ndarray | None:
-    """How far each point's neighbourhood is from a surface: float32 (n,), or None without ``qres``.
-
-    ``dist`` (n, k) are the k nearest distances, ``qres`` (n,) the RMS residuals of a local quadric
-    through the same neighbourhoods (:func:`houghcad.normals.quadric_residuals`). Their ratio to
-    the neighbourhood's radius is scale-free: about 0 on a smooth face at any sampling density, a
-    few hundredths where a neighbourhood straddles a crease, and 0.1-0.3 for points scattered in
-    space (uniform outliers), whose neighbourhoods no surface explains. Sparse outliers read as
-    sparse sampling too (:func:`link_scale`); this tells them from a face sampled sparsely.
-    """
-    if qres is None:
-        return None
-    r = dist[:, -1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out = np.where(r > 0, qres / r, 0.0)
-    return out.astype(np.float32)
 
 
 def _unit_cube(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:

@@ -24,7 +24,8 @@ from .families import Family
 from .growth import absorb, accept
 from .normals import pca_normals
 from .ransac import ransac_pieces
-from .recognize import dbscan, recognize
+from .clusters import dbscan
+from .recognize import recognize
 from .state import Candidate, Segmentation
 
 
