@@ -183,3 +183,20 @@ def test_sharp_edges_get_no_fillet(monkeypatch):
     for cloud, res in runs:
         off = houghcad.segment(cloud.points, seed=0)
         assert [(s.type, s.indices.tolist()) for s in res.segments] == [(s.type, s.indices.tolist()) for s in off.segments]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_points_within_reach_of_a_segment_are_the_brute_force_ones(seed):
+    """The voxel shortcut of the fillet pass's reach test gives each point's exact answer."""
+    from types import SimpleNamespace
+
+    from houghcad.blend import _Near
+
+    rng = np.random.default_rng(seed)
+    P = np.vstack([rng.normal(size=(1500, 3)) * rng.uniform(0.1, 0.5, 3), rng.random((500, 3)) * 2 - 1])
+    segs = [SimpleNamespace(indices=np.sort(rng.choice(len(P), 700, replace=False))) for _ in range(2)]
+    reach = float(rng.uniform(0.2, 0.8))
+    near = _Near(segs, P, reach)
+    for i, k in ((0, 1), (1, 0)):
+        d = np.linalg.norm(P[segs[i].indices][:, None] - P[segs[k].indices][None], axis=2).min(axis=1)
+        assert np.array_equal(near.within(i, k), segs[i].indices[d <= reach])

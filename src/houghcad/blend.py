@@ -179,7 +179,7 @@ def _propose(seg: Segmentation, i: int, j: int, nbrs: dict[int, set[int]], by_na
         return None
     # Only the points of each segment near the other: the corner may run
     # along part of a long edge only.
-    near_a, near_b = near.within(A.indices, j), near.within(B.indices, i)
+    near_a, near_b = near.within(i, j), near.within(j, i)
     if len(near_a) < ctx.min_points or len(near_b) < ctx.min_points:
         return None
     # Segments touching both may be pieces of the fillet itself.
@@ -215,21 +215,27 @@ def _propose(seg: Segmentation, i: int, j: int, nbrs: dict[int, set[int]], by_na
 
 
 class _Near:
-    """Which points lie within ``reach`` of a segment's points, exactly, for the segments of one
-    fillet pass (``reach`` is a quarter of the diagonal: most of a big face is that near its
-    neighbours, and a nearest-neighbour search per point costs more than the fillet fits).
+    """Which points of a segment lie within ``reach`` of another segment's points, exactly, for the
+    segments of one fillet pass (``reach`` is a quarter of the diagonal: most of a big face is that
+    near its neighbours, and a nearest-neighbour search per point costs more than the fillet fits).
 
-    A segment is also kept as one point per voxel of edge ``reach / COARSE``, within ``h√3`` of
-    each of its points. A point within ``reach`` of that sample is within reach of the segment,
-    one farther than ``reach + h√3`` from it is not; only those in between search all its points.
+    A segment is also kept as one point per voxel of edge ``h = reach / COARSE``, within ``h√3`` of
+    each of its points. A point within ``reach`` of that sample is within reach of the segment, one
+    farther than ``reach + h√3`` from it is not; only those in between search all its points. The
+    asking segment's points are first taken a voxel at a time: every point of a voxel lies within
+    ``RHO`` voxel edges of its centre, so a voxel whose centre decides for all of them is settled
+    without a search per point, and the answer is the per-point one.
     """
 
     COARSE = 8
+    #: Voxel edges from a voxel's centre to its farthest point (√3 / 2, rounded up).
+    RHO = 0.87
 
     def __init__(self, seg: Segmentation, P: np.ndarray, reach: float, workers: int = 1):
         self.seg, self.P, self.reach, self.workers = seg, P, reach, workers
         self.h = reach / self.COARSE
         self._trees: dict[int, tuple[cKDTree, cKDTree]] = {}
+        self._cells: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def _of(self, k: int) -> tuple[cKDTree, cKDTree]:
         if k not in self._trees:
@@ -238,15 +244,35 @@ class _Near:
             self._trees[k] = (cKDTree(Q), cKDTree(Q[first]))
         return self._trees[k]
 
-    def within(self, idx: np.ndarray, k: int) -> np.ndarray:
-        """The points ``idx`` (global indices) within ``reach`` of segment ``k``'s points."""
+    def _voxels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Segment ``k``'s occupied voxels: their centres (m, 3) and each point's voxel (n_k,)."""
+        if k not in self._cells:
+            Q = self.P[self.seg[k].indices]
+            lo = Q.min(axis=0)
+            _, first, inv = np.unique(voxel_keys(Q, lo, self.h), return_index=True, return_inverse=True)
+            centres = lo + (np.floor((Q[first] - lo) / self.h) + 0.5) * self.h
+            self._cells[k] = (centres, inv.ravel())
+        return self._cells[k]
+
+    def within(self, i: int, k: int) -> np.ndarray:
+        """The points of segment ``i`` (global indices) within ``reach`` of segment ``k``'s points."""
+        idx = self.seg[i].indices
         full, coarse = self._of(k)
-        X = self.P[idx]
-        d = coarse.query(X, distance_upper_bound=2 * self.reach, workers=self.workers)[0]
-        ok = d <= self.reach
-        unsure = np.flatnonzero(~ok & (d <= self.reach + np.sqrt(3) * self.h))
-        if len(unsure):
-            ok[unsure] = np.isfinite(full.query(X[unsure], distance_upper_bound=self.reach, workers=self.workers)[0])
+        centres, inv = self._voxels(i)
+        r, slack, rho = self.reach, np.sqrt(3) * self.h, self.RHO * self.h
+        D = coarse.query(centres, distance_upper_bound=2 * r, workers=self.workers)[0]
+        # Per voxel: all its points near the sample (1), all beyond the exact search (0), or mixed.
+        state = np.where(D + rho <= r, 1, np.where(D - rho > r + slack, 0, -1))[inv]
+        ok = state == 1
+        mixed = np.flatnonzero(state < 0)
+        if len(mixed):
+            X = self.P[idx[mixed]]
+            d = coarse.query(X, distance_upper_bound=2 * r, workers=self.workers)[0]
+            ok[mixed] = d <= r
+            unsure = mixed[(d > r) & (d <= r + slack)]
+            if len(unsure):
+                ok[unsure] = np.isfinite(full.query(self.P[idx[unsure]], distance_upper_bound=r,
+                                                    workers=self.workers)[0])
         return idx[ok]
 
 
