@@ -230,6 +230,8 @@ class _Near:
     COARSE = 8
     #: Voxel edges from a voxel's centre to its farthest point (√3 / 2, rounded up).
     RHO = 0.87
+    #: A voxel's centre, in voxel edges from its lower corner along each axis.
+    CENTRE = 0.5
 
     def __init__(self, seg: Segmentation, P: np.ndarray, reach: float, workers: int = 1):
         self.seg, self.P, self.reach, self.workers = seg, P, reach, workers
@@ -250,7 +252,7 @@ class _Near:
             Q = self.P[self.seg[k].indices]
             lo = Q.min(axis=0)
             _, first, inv = np.unique(voxel_keys(Q, lo, self.h), return_index=True, return_inverse=True)
-            centres = lo + (np.floor((Q[first] - lo) / self.h) + 0.5) * self.h
+            centres = lo + (np.floor((Q[first] - lo) / self.h) + self.CENTRE) * self.h
             self._cells[k] = (centres, inv.ravel())
         return self._cells[k]
 
