@@ -237,30 +237,31 @@ class _Near:
         self.seg, self.P, self.reach, self.workers = seg, P, reach, workers
         self.h = reach / self.COARSE
         self._trees: dict[int, tuple[cKDTree, cKDTree]] = {}
-        self._cells: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._cells: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     def _of(self, k: int) -> tuple[cKDTree, cKDTree]:
+        """KD-trees of segment ``k``'s points and of its sample, one point per voxel."""
         if k not in self._trees:
             Q = self.P[self.seg[k].indices]
-            _, first = np.unique(voxel_keys(Q, Q.min(axis=0), self.h), return_index=True)
-            self._trees[k] = (cKDTree(Q), cKDTree(Q[first]))
+            self._trees[k] = (cKDTree(Q), cKDTree(Q[self._voxels(k)[0]]))
         return self._trees[k]
 
-    def _voxels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Segment ``k``'s occupied voxels: their centres (m, 3) and each point's voxel (n_k,)."""
+    def _voxels(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Segment ``k``'s occupied voxels: the first of its points (m,) in each, their centres
+        (m, 3), and each point's voxel (n_k,)."""
         if k not in self._cells:
             Q = self.P[self.seg[k].indices]
             lo = Q.min(axis=0)
             _, first, inv = np.unique(voxel_keys(Q, lo, self.h), return_index=True, return_inverse=True)
             centres = lo + (np.floor((Q[first] - lo) / self.h) + self.CENTRE) * self.h
-            self._cells[k] = (centres, inv.ravel())
+            self._cells[k] = (first, centres, inv.ravel())
         return self._cells[k]
 
     def within(self, i: int, k: int) -> np.ndarray:
         """The points of segment ``i`` (global indices) within ``reach`` of segment ``k``'s points."""
         idx = self.seg[i].indices
         full, coarse = self._of(k)
-        centres, inv = self._voxels(i)
+        _, centres, inv = self._voxels(i)
         r, slack, rho = self.reach, np.sqrt(3) * self.h, self.RHO * self.h
         D = coarse.query(centres, distance_upper_bound=2 * r, workers=self.workers)[0]
         # Per voxel: all its points near the sample (1), all beyond the exact search (0), or mixed.
