@@ -7,9 +7,10 @@ DBSCAN over the points, written here with numba's union-find, and each point's o
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from scipy.spatial import cKDTree
+
+from .kernels import kernel
 
 
 def dbscan(P: np.ndarray, eps: float, min_samples: int, scale: np.ndarray | None = None) -> np.ndarray:
@@ -87,7 +88,7 @@ def _pairs(P: np.ndarray, eps: float, scale: np.ndarray | None) -> np.ndarray:
 # of small inlier sets per cloud, and building and validating a sparse matrix for each cost more
 # than the components themselves. Components are numbered by their lowest point afterwards, so
 # the labels are the same whichever way they are found.
-@numba.njit(cache=True)
+@kernel("i8, i8[:, ::1]")
 def _components(n: int, pairs: np.ndarray) -> np.ndarray:
     """A component id (its root point, int64 (n,)) per point of the undirected graph on n
     points with the edges ``pairs`` (m, 2)."""

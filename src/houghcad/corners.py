@@ -14,12 +14,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from .families import Family
 from .families.base import Primitive, radial, unit
 from .tolerances import FilletTolerances
+from .kernels import kernel
 
 _DEFAULT = FilletTolerances()
 
@@ -334,14 +334,14 @@ def _best_radius(X: np.ndarray, C: np.ndarray, rays: np.ndarray, n: np.ndarray, 
     return float(fine[int(np.argmin(sf))]), float(sf.min())
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _sign(x: float) -> int:
     return (x > 0) - (x < 0)
 
 
 # Scalar loops in numba: the radius grids ask for a profile's sum of squares some
 # sixty times a corner, and numpy's temporaries per call were most of a corner's cost.
-@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@kernel(nogil=True, inline="always", error_model="numpy")
 def _profile_geometry(C, t, r):
     """The rounded corner of radius r: the corner-to-tangent-point length s, the arc's centre
     (ox, oy), the centre-to-tangent-point vectors ta, tb and the sign of their cross product."""
@@ -359,7 +359,7 @@ def _profile_geometry(C, t, r):
     return s, ox, oy, tax, tay, tbx, tby, _sign(tax * tby - tay * tbx)
 
 
-@numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@kernel(nogil=True, inline="always", error_model="numpy")
 def _profile_point(X, i, C, t, n, r, geo):
     """Point i of X: its distance to the rounded corner (``geo`` from :func:`_profile_geometry`)
     and whether the arc is its nearest piece."""
@@ -383,7 +383,7 @@ def _profile_point(X, i, C, t, n, r, geo):
     return dist, False
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel("f8[:, ::1], f8[::1], f8[:, ::1], f8[:, ::1], f8", nogil=True, error_model="numpy")
 def _profile_rows(X, C, t, n, r):
     """:func:`profile_distance` in numba: distances (m,) and on-arc flags (m,)."""
     geo = _profile_geometry(C, t, r)
@@ -394,7 +394,7 @@ def _profile_rows(X, C, t, n, r):
     return dist, on_arc
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel("f8[:, ::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[::1]", nogil=True, error_model="numpy")
 def _profile_sse(X: np.ndarray, C: np.ndarray, t: np.ndarray, n: np.ndarray, radii: np.ndarray) -> np.ndarray:
     """Sum over X (m, 2) of the squared :func:`profile_distance` for each radius
     in ``radii`` (k,); returns (k,)."""

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
+
+from .kernels import kernel
 
 
 @dataclass(frozen=True)
@@ -105,7 +106,7 @@ def accumulate(grid: Grid, voter: np.ndarray, values: np.ndarray, weights: np.nd
     return H.reshape(grid.bins)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _bin(v, lower, width, bins, wrap):
     """The bin of value ``v`` along one axis of a grid (from ``lower``, ``width`` wide, ``bins``
     of them, cyclic when ``wrap``), or -1 when it falls outside (NaN and inf included): the
@@ -121,7 +122,7 @@ def _bin(v, lower, width, bins, wrap):
 
 # Voting by hand in numba rather than numpy's unique on (point, cell) keys: that sorted every
 # sample and held several (k, d) index arrays, the bulk of a round's time and memory on big clouds.
-@numba.njit(cache=True)
+@kernel("i8[::1], f8[:, ::1], f8[::1], f8[::1], i8[::1], b1[::1], f8[::1], i8[::1], f8[::1]")
 def _vote(voter, values, lower, width, bins, wrap, weights, order, H):
     """Add each sample's weight (1 when ``weights`` is empty) to its cell of the flat
     accumulator H, once per (point, cell): samples are taken in ``order`` (when given, else as
@@ -152,7 +153,7 @@ def _vote(voter, values, lower, width, bins, wrap, weights, order, H):
     return True
 
 
-@numba.njit(cache=True)
+@kernel()
 def _find(parent: np.ndarray, i: int) -> int:
     root = i
     while parent[root] != root:
@@ -164,7 +165,7 @@ def _find(parent: np.ndarray, i: int) -> int:
     return root
 
 
-@numba.njit(cache=True)
+@kernel()
 def _merge(parent, values, c, nb, v, peaks, pers, npk):
     """Union of the components of cells c and nb at level v: the younger
     (lower peak) dies, its persistence recorded. Returns the peak count."""
@@ -184,7 +185,7 @@ def _merge(parent, values, c, nb, v, peaks, pers, npk):
     return npk
 
 
-@numba.njit(cache=True)
+@kernel()
 def _survivors(values, order, parent, peaks, pers, npk):
     """Components alive at the lowest level: persistence = their peak value. ``order`` holds the
     cells above zero, highest first."""
@@ -197,7 +198,7 @@ def _survivors(values, order, parent, peaks, pers, npk):
     return peaks[:npk], pers[:npk]
 
 
-@numba.njit(cache=True)
+@kernel("f8[::1], i8[::1], b1[::1], i8[:, ::1]")
 def _persistence_grid(values: np.ndarray, shape: np.ndarray, wrap: np.ndarray, offsets: np.ndarray):
     """0-dimensional persistence of the superlevel sets of a grid function.
 
@@ -306,7 +307,7 @@ def smooth(H: np.ndarray, wrap=None) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True)
+@kernel("f8[::1], i8[::1], i8[::1]")
 def _persistence_graph(values: np.ndarray, indptr: np.ndarray, indices: np.ndarray):
     """Same sweep as :func:`_persistence_grid`, on a cell graph (CSR adjacency)."""
     n = values.size
@@ -431,7 +432,7 @@ def refine_direction(d: np.ndarray, dirs: np.ndarray, max_angle: float, weights:
 
 # The samples of each normal line are walked in numba, not materialised: as (n, s, d) arrays
 # fed to accumulate they cost 4x the time (a whole-cloud cylinder vote holds 10^7 samples).
-@numba.njit(cache=True)
+@kernel("f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], i8[::1], f8[::1]")
 def _line_vote(Q, M, s, lower, width, bins, H):
     """Add 1 to each cell of the flat accumulator H (grid ``lower``, cell ``width``, ``bins``)
     that the samples ``Q[i] + s[k] M[i]`` of point i's normal line fall in, once per (point,

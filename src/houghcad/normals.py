@@ -10,8 +10,9 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, TypeVar
 
-import numba
 import numpy as np
+
+from .kernels import kernel
 
 T = TypeVar("T")
 #: Rows per chunk of the per-point fits: fixed, so that the result does not depend on how
@@ -51,7 +52,7 @@ def pca_normals(points: np.ndarray, neighbors: np.ndarray, workers: int = 1) -> 
 # By hand in numba: numpy's einsum for the (rows, 3, 3) scatter matrices took most of the
 # per-point fits' time. The sums run in numpy's order (the mean over the neighbours, then each
 # entry over them in turn), so the matrices are numpy's to the bit. No GIL: threads share rows.
-@numba.njit(cache=True, nogil=True)
+@kernel("f8[:, ::1], i8[:, ::1]", "f8[:, ::1], i8[:, :]", "f8[:, ::1], i4[:, ::1]", nogil=True)
 def _scatter(points: np.ndarray, neighbors: np.ndarray) -> np.ndarray:
     """Σ (p − mean)(p − mean)ᵀ over each row's neighbours: (m, 3, 3), from points (n, 3) and
     neighbour indices (m, k)."""
@@ -90,7 +91,7 @@ def _scatter(points: np.ndarray, neighbors: np.ndarray) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel("f8[:, ::1], i8[:, ::1], f8[:, :, ::1]", nogil=True)
 def _quadric_system(points: np.ndarray, neighbors: np.ndarray, frames: np.ndarray) \
         -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each row's height-field quadric fit in its PCA frame ``frames`` (m, 3, 3), columns the

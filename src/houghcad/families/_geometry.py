@@ -3,8 +3,9 @@ coordinates, intersections of lines and planes, and a small Gauss–Newton solve
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from ..kernels import kernel
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -64,7 +65,7 @@ def axial(P: np.ndarray, point: np.ndarray, axis: np.ndarray) -> tuple[np.ndarra
     return _axial(P, np.asarray(point, np.float64), np.asarray(axis, np.float64))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def axial_row(P, i, point, axis):
     """Point i of P (n, 3) about the axis through ``point`` (unit ``axis``): its offset
     (v0, v1, v2) from ``point``, axial coordinate h, radial offset (w0, w1, w2) and radial
@@ -78,7 +79,7 @@ def axial_row(P, i, point, axis):
 # One pass in numba instead of four numpy temporaries: this runs on every candidate's points
 # (a whole-cloud round evaluates hundreds of axes over 10^5 points). Written out in scalar
 # arithmetic, it also gives the same bits on every CPU, where BLAS's dot kernels differ.
-@numba.njit(cache=True)
+@kernel("f8[:, ::1], f8[::1], f8[::1]", "f8[:, ::1], f8[::1], f8[:]")
 def _axial(P, point, axis):
     n = P.shape[0]
     h = np.empty(n)
@@ -88,7 +89,7 @@ def _axial(P, point, axis):
     return h, rho
 
 
-@numba.njit(cache=True)
+@kernel()
 def turned_axis(a0, e1, e2, x1, x2):
     """The axis ``unit(b)``, b = a0 + x1 e1 + x2 e2, of a refit that turns the axis a0 by two
     tangent parameters, and its derivatives U (3, 2) along e1 and e2 (as
@@ -168,7 +169,7 @@ def axis_from_normal_lines(P: np.ndarray, Nrm: np.ndarray) -> tuple[np.ndarray, 
     return point, c, pitch, float(max(w[0], 0.0))
 
 
-@numba.njit(cache=True)
+@kernel("f8[::1], f8[:, ::1]")
 def normal_equations(r, J):
     """Cost Σ r², JᵀJ (k, k) and Jᵀr (k,) of residuals r (n,) with Jacobian J (n, k), summed point
     by point in scalar loops: the same bits whatever the arrays' alignment, where BLAS's kernels
@@ -189,7 +190,7 @@ def normal_equations(r, J):
     return cost, A, g
 
 
-@numba.njit(cache=True)
+@kernel("f8[:, ::1], f8[::1], f8, f8[::1]")
 def damped_step(A, g, mu, D):
     """The step h of (A + mu diag(D)) h = −g by Cholesky in scalar loops (k × k, k ≤ 10); ok is
     False when the matrix is not positive definite."""

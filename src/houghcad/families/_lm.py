@@ -25,8 +25,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numba
 import numpy as np
+
+from ..kernels import kernel
 
 #: Step bound factor: the first trust region is FACTOR × the scaled norm of x0 (MINPACK's default).
 FACTOR = 100.0
@@ -131,12 +132,13 @@ def forward_difference_rows(fun: Callable[[np.ndarray], np.ndarray]) -> Callable
     return rows
 
 
-@numba.njit(cache=True)
+@kernel("f8[::1]")
 def _norm(v):
     return np.sqrt(np.sum(v * v))
 
 
-@numba.njit(cache=True)
+@kernel("f8[:, ::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], i8[::1], f8[::1], f8[::1]",
+        "f8[::1, :], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], i8[::1], f8[::1], f8[::1]")
 def _accept_jacobian(A, r, x, R, W, ipvt, xt, s):
     """Factor the Jacobian A (m, n) at x (A is overwritten), update the scaling, test the
     gradient, and put the first trial point in xt. Returns 0 (evaluate xt) or a stop code."""
@@ -185,7 +187,7 @@ def _accept_jacobian(A, r, x, R, W, ipvt, xt, s):
     return 0
 
 
-@numba.njit(cache=True)
+@kernel()
 def _trial(x, R, W, ipvt, xt, s):
     """The Levenberg–Marquardt step within the trust region: xt = x + step."""
     diag, qtf, step = W[0], W[1], W[3]
@@ -198,7 +200,7 @@ def _trial(x, R, W, ipvt, xt, s):
         s[_DELTA] = min(s[_DELTA], s[_PNORM])
 
 
-@numba.njit(cache=True)
+@kernel("f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], i8[::1], f8[::1], f8[::1]")
 def _judge_trial(rt, r, x, R, W, ipvt, xt, s):
     """Compare the trial's actual reduction with the model's, move the trust region, accept or
     reject xt and test convergence. Returns 0 (evaluate the new xt), -1 (accepted: evaluate the
@@ -256,7 +258,7 @@ def _judge_trial(rt, r, x, R, W, ipvt, xt, s):
     return 0
 
 
-@numba.njit(cache=True)
+@kernel()
 def _qr_pivoted(A, ipvt, rdiag, acnorm):
     """Householder QR of A (m, n) with column pivoting, in place: the vectors below and on the
     diagonal, R's off-diagonal part above it, R's diagonal in rdiag; ipvt the permutation and
@@ -302,7 +304,7 @@ def _qr_pivoted(A, ipvt, rdiag, acnorm):
         rdiag[j] = -ajnorm
 
 
-@numba.njit(cache=True)
+@kernel()
 def _lmpar(R, ipvt, diag, qtb, delta, par, x, sdiag, wa2):
     """The Levenberg–Marquardt parameter: the par ≥ 0 whose solution x of
     min ||[R P^T; √par D] x − [qtb; 0]|| has ||D x|| within 10 % of delta (or par = 0 when the
@@ -354,7 +356,7 @@ def _lmpar(R, ipvt, diag, qtb, delta, par, x, sdiag, wa2):
         par = max(parl, par + parc)
 
 
-@numba.njit(cache=True)
+@kernel()
 def _gauss_newton_step(R, ipvt, qtb, x):
     """x (n,) solving R P^T x = qtb, zero along R's singular tail; returns the rank used."""
     n = R.shape[0]
@@ -376,7 +378,7 @@ def _gauss_newton_step(R, ipvt, qtb, x):
     return nsing
 
 
-@numba.njit(cache=True)
+@kernel()
 def _par_bounds(R, ipvt, diag, qtb, delta, wa2, dxnorm, fp, nsing):
     """Bounds (parl, paru) on the parameter and the scaled gradient's norm: parl from Newton's
     step at par = 0 (0 when R is singular), paru from the gradient."""
@@ -406,7 +408,7 @@ def _par_bounds(R, ipvt, diag, qtb, delta, wa2, dxnorm, fp, nsing):
     return parl, paru, gnorm
 
 
-@numba.njit(cache=True)
+@kernel()
 def _qrsolv(R, ipvt, dg, qtb, x, sdiag):
     """Solve [R P^T; D] x ≈ [qtb; 0] for the diagonal D = dg (n,) by Givens rotations that
     eliminate D against R. The rotated triangle S goes to R's strict lower part (transposed) and

@@ -23,8 +23,9 @@ parameters).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from ..kernels import kernel
 
 TAU = 2.0 * np.pi
 #: Points the likelihood reads (a seeded subsample of larger sets): the radii's standard error at
@@ -41,7 +42,7 @@ SAMPLES_PER_SIGMA = 2.0
 MAX_SAMPLES = 512
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel("f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8, f8, f8", nogil=True)
 def _nll(rho: np.ndarray, w: np.ndarray, wscale: np.ndarray, cr: np.ndarray, cw: np.ndarray,
          wt: np.ndarray, period: float, sigma: float, background: float) -> float:
     """Negative log-likelihood of the points (ρ, w) (m,) each, ``wscale`` (m,) the factor of σ

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numba
 import numpy as np
 
 from ..hough import Grid
@@ -14,6 +13,7 @@ from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, 
                    axial_row, register, swept_votes, tangent_basis, turned_axis, unit)
 from . import _lm
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, span
+from ..kernels import kernel
 
 
 def cone_frame(P, N):
@@ -182,7 +182,7 @@ class Cone(Family):
 # The refit's residuals and analytic Jacobian in numba: the Levenberg–Marquardt (:mod:`._lm`)
 # asks for them 10–40 times a refit, in every cluster's vote, and numpy's per-call overhead on a
 # few hundred points was most of the refit's time. Finite differences would cost six residuals more a step.
-@numba.njit(cache=True)
+@kernel("f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], b1")
 def _refit_rows(P, p0, a0, e1, e2, x, jacobian):
     """Residuals r = ρ cos α − h sin α (n,) of the points P (n, 3) about the cone with apex
     p0 + x[:3], axis unit(a0 + x3 e1 + x4 e2) and half-angle x5, and, when ``jacobian``, their
@@ -211,7 +211,7 @@ def _refit_rows(P, p0, a0, e1, e2, x, jacobian):
 
 # By hand in numba: gamma's (n, bins) samples are 200 MB per 100k points, and voting them
 # afterwards reads them again.
-@numba.njit(cache=True)
+@kernel("f8[::1], f8[::1], f8[::1], f8, f8, f8[:, ::1]")
 def _sweep_votes(z: np.ndarray, rho: np.ndarray, b: np.ndarray, lo: float, w: float, H: np.ndarray) -> None:
     """Add to H (len(b), k) a vote per point (z, rho (n,)) and apex height b[j] below it, in the
     half-angle bin of atan2(rho, z − b[j]) (bins from ``lo``, ``w`` wide; ``b`` ascending).

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numba
 import numpy as np
 
 from ..context import neighbour_table
@@ -13,6 +12,7 @@ from ..hough import Grid, direction_accumulator, normal_line_peaks, refine_direc
 from ..preprocess import rotation_to_z
 from .base import Frame, Family, Placement, Primitive, axial, damped_step, radial, register, tangent_basis, unit
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
+from ..kernels import kernel
 
 
 def axis_candidates(P, N, ctx, max_dirs):
@@ -38,7 +38,7 @@ def axis_candidates(P, N, ctx, max_dirs):
     return out + [refine_direction(d, c, np.radians(6.0)) for d in dirs]
 
 
-@numba.njit(cache=True)
+@kernel()
 def _normal_equations(P, a0, p0, e1, e2, x):
     """Cost Σ r², JᵀJ (5, 5) and Jᵀr (5,) of the cylinder residuals r = ρ − x[4] at the
     parameters x: the axis unit(a0 + x0 e1 + x1 e2) through p0 + x2 e1 + x3 e2, radius x4."""
@@ -72,7 +72,7 @@ def _normal_equations(P, a0, p0, e1, e2, x):
 # The cylinder's refit by hand in numba: it runs on every candidate's inliers, thousands of times
 # a cloud, and numpy's per-call overhead on a few hundred points was most of its time. The same
 # damped Gauss–Newton as families.base.gauss_newton (8 iterations, the same damping and stops).
-@numba.njit(cache=True)
+@kernel("f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8")
 def _gauss_newton_fit(P, a0, p0, e1, e2, r0):
     """The parameters x (5,) of :func:`_normal_equations` that fit the points P (n, 3), from
     (0, 0, 0, 0, r0); None when a step's system is singular or its cost not finite."""

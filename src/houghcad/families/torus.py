@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numba
 import numpy as np
 
 from ..hough import Grid, persistent_peaks, smooth
@@ -14,6 +13,7 @@ from .base import (Frame, Family, Placement, Primitive, axis_from_normal_lines, 
                    axial_row, tangent_basis, turned_axis, unit)
 from . import _lm
 from ._sampling import ORIGIN, TAU, Z_AXIS, Array, Sampler, partial, span
+from ..kernels import kernel
 
 
 def torus_frame(P, N):
@@ -108,7 +108,7 @@ def tube_heights(P: np.ndarray, N: np.ndarray, q: np.ndarray, a: np.ndarray, ctx
 
 
 # By hand in numba: rasterising lines into an accumulator, one vote per cell a line crosses.
-@numba.njit(cache=True)
+@kernel("f8[::1], f8[::1], f8[:], f8[:], f8, f8, f8, i8, i8")
 def _line_votes(rho, h, d_rho, d_h, lo_rho, lo_h, cell, n_rho, n_h):
     """Votes (n_rho, n_h) of the lines (rho, h) + t (d_rho, d_h) (all (n,), directions unit) over
     the meridian cells ``cell`` wide from (lo_rho, lo_h): each line once per cell it crosses."""
@@ -287,7 +287,7 @@ class Torus(Family):
 # The refit's residuals and analytic Jacobian in numba, as the cone's (cone._refit_rows): the
 # Levenberg–Marquardt (:mod:`._lm`) asks for them up to 50 times a refit, and numpy's per-call
 # overhead on a few hundred points was most of the refit's time.
-@numba.njit(cache=True)
+@kernel("f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], b1")
 def _refit_rows(P, c0, a0, e1, e2, x, jacobian):
     """Residuals r = D − x6 (n,) of the points P (n, 3) about the torus with centre c0 + x[:3],
     axis unit(a0 + x3 e1 + x4 e2), major radius x5 and minor radius x6, where D = hypot(ρ − R, h)
@@ -321,7 +321,7 @@ def _refit_rows(P, c0, a0, e1, e2, x, jacobian):
 
 
 # By hand in numba: gamma's (n, bins) samples are held whole and then voted.
-@numba.njit(cache=True)
+@kernel("f8[::1], f8[::1], f8[::1], f8, f8, f8[:, ::1]")
 def _sweep_votes(z: np.ndarray, rho: np.ndarray, R: np.ndarray, lo: float, w: float, H: np.ndarray) -> None:
     """Add to H (len(R), k) a vote per point (z, rho (n,)) and major radius R[j], in the minor
     radius bin of hypot(rho − R[j], z) (bins from ``lo``, ``w`` wide)."""
