@@ -13,7 +13,6 @@ from houghcad import synth
 from houghcad.consolidation import _covered, consolidate, merge_complex, revisit_poor_fits
 from houghcad.evaluate import classification_measures
 from houghcad.families import REGISTRY, select
-from houghcad.families.base import Primitive
 from houghcad.growth import accept
 from houghcad.recognize import recognize
 from houghcad.state import Candidate, Segmentation

@@ -240,7 +240,7 @@ def test_normal_lines_meeting_in_two_places_place_a_torus_at_each():
     P1, N1 = sample_torus(rng, 1500, 2.0, 0.5)
     P2, N2 = sample_torus(rng, 1500, 1.2, 0.6)
     P2[:, 2] += 1.5
-    P, N = np.r_[P1, P2], np.r_[N1, N2]
+    P = np.r_[P1, P2]
     ctx = _context(P)
     x, nrm = ctx.pre.points, ctx.pre.normals
     q = ctx.pre.transform.points(np.zeros((1, 3)))[0]  # the first tube's centre

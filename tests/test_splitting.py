@@ -190,7 +190,7 @@ def test_where_the_vote_finds_nothing_the_fallback_in_larger_pieces_is_taken(mon
     ctx = context(cloud.points)
     k = [p["name"] for p in cloud.primitives].index("hole 0")
     hole = np.flatnonzero(cloud.labels == k)
-    P, N, T = ctx.pre.points, ctx.pre.normals, ctx.pre.transform
+    P, T = ctx.pre.points, ctx.pre.transform
     cyl = REGISTRY["cylinder"]
     g = cloud.primitives[k]["params"]  # world units; the context's points are in standard units
     prim = Primitive("cylinder", {"axis_point": T.points(np.asarray(g["axis_point"])[None])[0],
