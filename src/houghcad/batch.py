@@ -31,6 +31,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Protocol
 
+from .cliopts import SegmentOptions
 from .errors import InputError
 
 __all__ = ["BatchRow", "CloudJob", "SegmentOptions", "batch", "expand_inputs", "plan", "segment_cloud",
@@ -91,46 +92,6 @@ class BatchRow:
     def measures(self) -> dict[str, float]:
         """The classification measures that are known."""
         return {m: getattr(self, m) for m in MEASURES if getattr(self, m) is not None}
-
-
-@dataclass(frozen=True)
-class SegmentOptions:
-    """The options of ``houghcad segment`` that shape a result (see :func:`houghcad.segment`)."""
-
-    families: str = "simple"
-    epsilon: float | None = None
-    seed: int = 0
-    normals_method: str = "auto"
-    noise: str = "auto"
-    persistence: float | None = None
-    min_points: int | None = None
-    tolerances: tuple[tuple[str, float], ...] = ()  # ("stage.name", value) pairs
-    merge: bool = True
-    family_files: tuple[str, ...] = ()  # absolute paths
-    scan: int | None = None  # E57 only: the scan to read
-    drop_invalid: bool = False  # leave out rows with NaN or inf coordinates
-    max_points: int | None = None  # None: the pipeline's default subsample size
-    full_resolution: bool = False
-
-    def read_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of :func:`houghcad.io.read_points`."""
-        return {"scan": self.scan, "drop_invalid": self.drop_invalid}
-
-    def segment_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of :func:`houghcad.cli._run_segmentation`, as ``segment`` passes them."""
-        kw: dict[str, Any] = {"families": self.families, "epsilon": self.epsilon, "seed": self.seed,
-                              "normals_method": self.normals_method, "merge": self.merge, "noise": self.noise}
-        if self.persistence is not None:
-            kw["persistence"] = self.persistence
-        if self.min_points is not None:
-            kw["min_points"] = self.min_points
-        if self.tolerances:
-            kw["tolerances"] = dict(self.tolerances)
-        if self.max_points is not None:
-            kw["max_points"] = self.max_points
-        if self.full_resolution:
-            kw["full_resolution"] = True
-        return kw
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from .errors import InputError
@@ -98,27 +99,67 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
                    "instead of refusing the file, and say how many")
 
 
+@dataclass(frozen=True)
+class SegmentOptions:
+    """The options of ``houghcad segment`` that shape a result (see :func:`houghcad.segment`)."""
+
+    families: str = "simple"
+    epsilon: float | None = None
+    seed: int = 0
+    normals_method: str = "auto"
+    noise: str = "auto"
+    persistence: float | None = None
+    min_points: int | None = None
+    tolerances: tuple[tuple[str, float], ...] = ()  # ("stage.name", value) pairs
+    merge: bool = True
+    family_files: tuple[str, ...] = ()  # absolute paths
+    scan: int | None = None  # E57 only: the scan to read
+    drop_invalid: bool = False  # leave out rows with NaN or inf coordinates
+    max_points: int | None = None  # None: the pipeline's default subsample size
+    full_resolution: bool = False
+
+    def read_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`houghcad.io.read_points`."""
+        return {"scan": self.scan, "drop_invalid": self.drop_invalid}
+
+    def segment_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`houghcad.cli._run_segmentation`, as ``segment`` passes them."""
+        kw: dict[str, Any] = {"families": self.families, "epsilon": self.epsilon, "seed": self.seed,
+                              "normals_method": self.normals_method, "merge": self.merge, "noise": self.noise}
+        if self.persistence is not None:
+            kw["persistence"] = self.persistence
+        if self.min_points is not None:
+            kw["min_points"] = self.min_points
+        if self.tolerances:
+            kw["tolerances"] = dict(self.tolerances)
+        if self.max_points is not None:
+            kw["max_points"] = self.max_points
+        if self.full_resolution:
+            kw["full_resolution"] = True
+        return kw
+
+
+
+def segment_options(args: argparse.Namespace) -> SegmentOptions:
+    """The options of :func:`add_segment_options` as :class:`SegmentOptions` (a bad
+    ``--tolerance`` is an InputError; ``--family-file`` is left to the caller)."""
+    tolerances = tuple(parse_tolerances(args.tolerance).items()) if args.tolerance else ()
+    return SegmentOptions(families=args.families, epsilon=args.epsilon, seed=args.seed, normals_method=args.normals,
+                          noise=args.noise, persistence=args.persistence, min_points=args.min_points,
+                          tolerances=tolerances, merge=not args.no_merge, scan=args.scan,
+                          drop_invalid=args.drop_invalid, max_points=args.max_points,
+                          full_resolution=args.full_resolution)
+
+
 def segment_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     """Keyword arguments of :func:`houghcad.cli._run_segmentation` from the options of
     :func:`add_segment_options` (a bad ``--tolerance`` is an InputError)."""
-    kwargs: dict[str, Any] = {"families": args.families, "epsilon": args.epsilon, "seed": args.seed,
-                              "normals_method": args.normals, "merge": not args.no_merge, "noise": args.noise}
-    if args.persistence is not None:
-        kwargs["persistence"] = args.persistence
-    if args.min_points is not None:
-        kwargs["min_points"] = args.min_points
-    if args.tolerance:
-        kwargs["tolerances"] = parse_tolerances(args.tolerance)
-    if args.max_points is not None:
-        kwargs["max_points"] = args.max_points
-    if args.full_resolution:
-        kwargs["full_resolution"] = True
-    return kwargs
+    return segment_options(args).segment_kwargs()
 
 
 def read_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     """Keyword arguments of :func:`houghcad.io.read_points` from :func:`add_segment_options`."""
-    return {"scan": args.scan, "drop_invalid": args.drop_invalid}
+    return segment_options(args).read_kwargs()
 
 
 def parse_tolerances(items: Sequence[str]) -> dict[str, float]:
