@@ -74,11 +74,34 @@ def test_a_call_no_signature_takes_runs_under_the_jit_with_the_same_answer() -> 
     from houghcad.families import _lm
 
     v = np.arange(10.0)
-    before = len(kernels.FALLBACKS)
+    before = kernels.FALLBACKS.copy()
     assert _lm._norm(v) == pytest.approx(np.linalg.norm(v))
-    assert len(kernels.FALLBACKS) == before
+    assert kernels.FALLBACKS == before
     assert _lm._norm(v[::2]) == pytest.approx(np.linalg.norm(v[::2]))  # strided: not f8[::1]
-    assert kernels.FALLBACKS[before:] == ["houghcad.families._lm._norm"]
+    assert kernels.FALLBACKS - before == {"houghcad.families._lm._norm": 1}
+
+
+@needs_aot
+def test_every_kernel_has_a_jit_fallback_for_its_signatures() -> None:
+    from numba.core import sigutils
+
+    for k in _kernels():
+        disp = k.jit()
+        for i, sig in enumerate(k.signatures):
+            args, _ = sigutils.normalize_signature(f"({', '.join(_numba_type(t) for t in sig)},)")
+            disp.compile(args)  # the kernels it calls resolve to numba dispatchers too
+        assert len(disp.overloads) >= len(k.signatures)
+
+
+def _numba_type(t: ArgType) -> str:
+    if t.ndim == 0:
+        return t.code
+    axes = [":"] * t.ndim
+    if t.layout == "C":
+        axes[-1] = "::1"
+    elif t.layout == "F":
+        axes[0] = "::1"
+    return f"{t.code}[{', '.join(axes)}]"
 
 
 _RUN = """
@@ -92,7 +115,7 @@ for name, fams, noise in (("gear_like", "simple", 0.0), ("shaft_with_groove", "s
     r = houghcad.segment(pts, families=fams, seed=0, n_jobs=1)
     res.append([[s.type, s.indices.tolist(), repr(sorted(s.params.items()))] for s in r.segments])
 print(json.dumps(dict(aot=kernels.aot_loaded(), numba="numba" in sys.modules,
-                      fallbacks=kernels.FALLBACKS, segments=res)))
+                      fallbacks=dict(kernels.FALLBACKS), segments=res)))
 """
 
 
@@ -107,7 +130,7 @@ def test_ahead_of_time_run_matches_the_jit_and_never_imports_numba() -> None:
     aot, jit = _run(jit=False), _run(jit=True)
     assert aot["aot"] and not jit["aot"]
     assert not aot["numba"] and jit["numba"]
-    assert aot["fallbacks"] == []  # every call the pipeline makes has its compiled signature
+    assert aot["fallbacks"] == {}  # every call the pipeline makes has its compiled signature
     assert aot["segments"] == jit["segments"]
     assert all(len(s) >= 3 for s in aot["segments"])
 

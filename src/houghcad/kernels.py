@@ -26,6 +26,7 @@ import importlib
 import os
 import types
 import warnings
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -127,7 +128,7 @@ class Kernel:
         for sig, fn in zip(self.signatures, self.compiled):
             if fn is not None and len(sig) == len(args) and all(t.accepts(a) for t, a in zip(sig, args)):
                 return fn(*args)
-        FALLBACKS.append(f"{self.py_func.__module__}.{self.__name__}")
+        FALLBACKS[f"{self.py_func.__module__}.{self.__name__}"] += 1
         return self.jit()(*args)
 
     def jit(self) -> Any:
@@ -149,9 +150,9 @@ class Kernel:
 #: Kernels declared so far, in declaration order: (Python function, signature strings, numba
 #: options, the dispatcher). ``setup.py`` compiles these.
 REGISTRY: list[tuple[Callable, tuple[str, ...], dict[str, Any], Any]] = []
-#: Kernels called with types no declared signature takes (module.name, once per call): such a
-#: call ran under numba's JIT. The tests check that a run leaves this empty.
-FALLBACKS: list[str] = []
+#: Calls with types no declared signature takes, by kernel (module.name): such a call ran under
+#: numba's JIT. The tests check that a run leaves this empty.
+FALLBACKS: Counter[str] = Counter()
 
 
 def source_digest() -> int:
