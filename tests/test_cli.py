@@ -93,7 +93,10 @@ def fake_pipeline(monkeypatch):
 
 def test_version(capsys):
     assert main(["--version"]) == 0
-    assert capsys.readouterr().out.strip() == f"houghcad {__version__}"
+    from houghcad.kernels import aot_loaded
+
+    how = "compiled ahead of time" if aot_loaded() else "compiled by numba on first use"
+    assert capsys.readouterr().out.strip() == f"houghcad {__version__} (kernels {how})"
 
 
 def test_help_exits_zero(capsys):

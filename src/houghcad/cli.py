@@ -42,6 +42,14 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(f"{message} (see '{self.prog} --help')")
 
 
+def _version() -> str:
+    """The version line, with how the numba kernels run (see :mod:`houghcad.kernels`)."""
+    from .kernels import aot_loaded
+
+    how = "compiled ahead of time" if aot_loaded() else "compiled by numba on first use"
+    return f"{PROG} {__version__} (kernels {how})"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``houghcad`` argument parser with its subcommands."""
     parser = _Parser(
@@ -49,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Recognise planes, cylinders, cones, spheres and tori in 3-D point clouds "
         "of mechanical parts with Hough transforms.",
     )
-    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser("segment", help="segment a point cloud into primitives",
