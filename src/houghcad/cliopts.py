@@ -139,7 +139,6 @@ class SegmentOptions:
         return kw
 
 
-
 def segment_options(args: argparse.Namespace) -> SegmentOptions:
     """The options of :func:`add_segment_options` as :class:`SegmentOptions` (a bad
     ``--tolerance`` is an InputError; ``--family-file`` is left to the caller)."""
