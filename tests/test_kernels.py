@@ -79,6 +79,8 @@ def test_a_call_no_signature_takes_runs_under_the_jit_with_the_same_answer() -> 
     assert kernels.FALLBACKS == before
     assert _lm._norm(v[::2]) == pytest.approx(np.linalg.norm(v[::2]))  # strided: not f8[::1]
     assert kernels.FALLBACKS - before == {"houghcad.families._lm._norm": 1}
+    assert _lm._norm(v=v) == pytest.approx(np.linalg.norm(v))  # by keyword: the JIT's too
+    assert kernels.FALLBACKS - before == {"houghcad.families._lm._norm": 2}
 
 
 @needs_aot

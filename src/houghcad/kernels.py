@@ -124,12 +124,13 @@ class Kernel:
         self.__doc__ = self.py_func.__doc__
         self.__wrapped__ = self.py_func
 
-    def __call__(self, *args: Any) -> Any:
-        for sig, fn in zip(self.signatures, self.compiled):
-            if fn is not None and len(sig) == len(args) and all(t.accepts(a) for t, a in zip(sig, args)):
-                return fn(*args)
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        if not kwargs:  # pycc's functions take their arguments by position only
+            for sig, fn in zip(self.signatures, self.compiled):
+                if fn is not None and len(sig) == len(args) and all(t.accepts(a) for t, a in zip(sig, args)):
+                    return fn(*args)
         FALLBACKS[f"{self.py_func.__module__}.{self.__name__}"] += 1
-        return self.jit()(*args)
+        return self.jit()(*args, **kwargs)
 
     def jit(self) -> Any:
         """This kernel as a numba dispatcher, with every kernel it calls one as well."""
