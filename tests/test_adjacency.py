@@ -109,3 +109,30 @@ def test_border_points_are_the_neighbouring_faces_rows_and_the_surface_through_t
     # Points of the row's own segment are not its border.
     seg2 = Segmentation.of(len(pts), [plane_candidate(ctx, a), plane_candidate(ctx, b), plane_candidate(ctx, row)])
     assert not np.isin(border_points(row, seg2.labels, ctx, 12), row).any()
+
+
+def test_the_run_s_pairs_give_the_graph_of_a_tree_over_the_segmented_points():
+    # Three segments and free points at random: the pairs read once over all points, kept to
+    # the segmented ones, are the pairs of a tree over those alone.
+    rng = np.random.default_rng(3)
+    P = rng.random((600, 3))
+    lab = rng.integers(-1, 3, len(P))
+    link = 0.12
+    pairs = cKDTree(P).query_pairs(link, output_type="ndarray").astype(np.int32)
+    got = SegmentGraph.build(lab, P, link, pairs=pairs)
+    ref = SegmentGraph.build(lab, P, link)
+    assert got.edges.tolist() == ref.edges.tolist()
+    assert got.close_pairs.tolist() == ref.close_pairs.tolist()
+    assert got.contact.tolist() == ref.contact.tolist()
+    key = lambda g: sorted(map(tuple, np.c_[g.cross, g.edge_of].tolist()))  # noqa: E731
+    assert key(got) == key(ref)  # the same cross pairs, in another order
+
+
+def test_preprocessed_pairs_are_read_once_per_radius():
+    ctx = context(np.random.default_rng(0).random((300, 3)))
+    a = ctx.pre.pairs_within(ctx.link)
+    assert a.dtype == np.int32 and (a[:, 0] < a[:, 1]).all()
+    d = np.linalg.norm(ctx.pre.points[a[:, 0]] - ctx.pre.points[a[:, 1]], axis=1)
+    assert (d < ctx.link).all()
+    assert len(a) == len(cKDTree(ctx.pre.points).query_pairs(ctx.link))
+    assert ctx.pre.pairs_within(ctx.link) is a

@@ -56,7 +56,8 @@ class SegmentGraph:
     @classmethod
     def build(cls, labels: np.ndarray, P: np.ndarray, link: float, k: int | None = None,
               tree: cKDTree | None = None, workers: int = 1,
-              table: tuple[np.ndarray, np.ndarray] | None = None) -> "SegmentGraph":
+              table: tuple[np.ndarray, np.ndarray] | None = None,
+              pairs: np.ndarray | None = None) -> "SegmentGraph":
         """The graph of the segments ``labels`` (n,) (-1: free) over points P (n, 3).
 
         With ``k`` the contacts are each segmented point's k nearest points
@@ -67,12 +68,18 @@ class SegmentGraph:
         points closer than ``link`` counts once. ``workers``: the query's
         threads (the result does not depend on them). ``table``: every point's k
         nearest within ``link`` as :meth:`~houghcad.preprocess.Preprocessed.neighbours_within`
-        gives them, read instead of querying ``tree``.
+        gives them, read instead of querying ``tree``. ``pairs``: without ``k``, every pair of
+        points closer than ``link`` as :meth:`~houghcad.preprocess.Preprocessed.pairs_within`
+        gives them, read instead of querying a tree of the segmented points (the same pairs, in
+        another order: ``cross`` comes in that order, every count is the same).
         """
         labels = np.asarray(labels, dtype=np.int64)
         m = max(int(labels.max(initial=-1)) + 1, 1)
         owned = np.flatnonzero(labels >= 0)
-        if k is None:
+        if k is None and pairs is not None:
+            both = (labels[pairs[:, 0]] >= 0) & (labels[pairs[:, 1]] >= 0)
+            a, b = pairs[both, 0].astype(np.int64), pairs[both, 1].astype(np.int64)
+        elif k is None:
             close = cKDTree(P[owned]).query_pairs(link, output_type="ndarray") if len(owned) > 1 else \
                 np.zeros((0, 2), np.int64)
             a, b = owned[close[:, 0]], owned[close[:, 1]]
@@ -110,7 +117,8 @@ class SegmentGraph:
     def of(cls, seg: Segmentation, ctx: Context, k: int | None = None) -> "SegmentGraph":
         """The graph of a segmentation state, at the run's link distance (see :meth:`build`)."""
         table = None if k is None else ctx.pre.neighbours_within(k, ctx.link, threads(ctx))
-        return cls.build(seg.labels, ctx.pre.points, ctx.link, k, ctx.pre.tree, threads(ctx), table)
+        pairs = ctx.pre.pairs_within(ctx.link) if k is None else None
+        return cls.build(seg.labels, ctx.pre.points, ctx.link, k, ctx.pre.tree, threads(ctx), table, pairs)
 
     def neighbours(self, keep: np.ndarray | None = None) -> dict[int, set[int]]:
         """Each segment's neighbours over the edges ``keep`` (bool (k,); default all)."""

@@ -284,7 +284,7 @@ class Associator:
         """
         if len(cands) < 2:
             return set()
-        g = SegmentGraph.build(owner, self._pre.points, link)
+        g = SegmentGraph.build(owner, self._pre.points, link, pairs=self._pre.pairs_within(link))
         sizes = np.array([len(c.indices) for c in cands])
         least = g.contact.min(axis=1)
         u, v = g.edges[:, 0], g.edges[:, 1]

@@ -163,6 +163,15 @@ class Preprocessed:
             self._tables[key] = (np.where(ok, nb.reshape(n, -1), 0).astype(np.int32), ok)
         return self._tables[key]
 
+    def pairs_within(self, radius: float) -> np.ndarray:
+        """Every pair (i, j), i < j, of points closer than ``radius`` (standard units), (m, 2)
+        int32, in the KD-tree's order. Read once per radius and kept: the segment graphs of a
+        run (the fillet pass's, the association's) ask for the same pairs over other labels."""
+        key = ("pairs", float(radius))
+        if key not in self._tables:
+            self._tables[key] = self.tree.query_pairs(radius, output_type="ndarray").astype(np.int32)
+        return self._tables[key]
+
 
 #: The 16-neighbour noise estimate (spacings) above which ``noise="auto"``
 #: widens the normals' neighbourhood: sharp edges alone push it to ~0.2
