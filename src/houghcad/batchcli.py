@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .batch import OUTPUT_NAMES, BatchRow
-from .cliopts import add_segment_options, non_negative_int, positive_int, read_kwargs, segment_kwargs
+from .cliopts import add_segment_options, non_negative_int, positive_int, segment_options
 from .errors import InputError
 
 __all__ = ["add_batch_parser", "Progress"]
@@ -143,14 +143,14 @@ def _cmd_batch(args: argparse.Namespace) -> int:
 
     if args.scheduler and args.workers is not None:
         raise InputError("--workers sets the size of the local cluster: not with --scheduler")
-    kwargs = segment_kwargs(args)
+    options = segment_options(args)
     progress = Progress(quiet=args.quiet)
     t0 = time.monotonic()
     try:
         rows = batch(args.inputs, args.output, scheduler=args.scheduler, workers=args.workers,
                      retries=args.retries, timeout=args.timeout, force=args.force, fit4cad=args.fit4cad,
                      ply=args.ply, png=args.png, report=args.report, progress=progress,
-                     family_files=args.family_file, **kwargs, **read_kwargs(args))
+                     family_files=args.family_file, **options.segment_kwargs(), **options.read_kwargs())
     finally:
         progress.close()
     counts = {s: sum(r.status == s for r in rows) for s in ("ok", "skipped", "error")}

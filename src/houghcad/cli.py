@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from . import __version__
-from .cliopts import add_segment_options, parse_tolerances, positive_int, read_kwargs, segment_kwargs
+from .cliopts import add_segment_options, positive_int, segment_options
 from .errors import InputError
 from .io import PointCloud, read_points, write_fit4cad_primitives, write_json
 from .report import summary_table
@@ -280,8 +280,8 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 
         _load_family_files(args.family_file)
         select(args.families)  # unknown names fail now, not after reading the cloud
-    parse_tolerances(args.tolerance)  # a bad one fails before the cloud is read
-    cloud = read_points(inp, **read_kwargs(args))
+    options = segment_options(args)  # a bad --tolerance fails before the cloud is read
+    cloud = read_points(inp, **options.read_kwargs())
     if cloud.dropped and not args.quiet:
         print(f"{PROG}: {inp}: left out {cloud.dropped} points with a NaN or infinite coordinate",
               file=sys.stderr)
@@ -298,7 +298,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
         _check_output(path, [inp])
         taken.append(path)
 
-    kwargs = segment_kwargs(args)
+    kwargs = options.segment_kwargs()
     kwargs["n_jobs"] = args.jobs
     if args.trace:
         kwargs["trace"] = _trace_writer(Path(args.trace), cloud.points)

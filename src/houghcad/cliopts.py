@@ -150,17 +150,6 @@ def segment_options(args: argparse.Namespace) -> SegmentOptions:
                           full_resolution=args.full_resolution)
 
 
-def segment_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """Keyword arguments of :func:`houghcad.cli._run_segmentation` from the options of
-    :func:`add_segment_options` (a bad ``--tolerance`` is an InputError)."""
-    return segment_options(args).segment_kwargs()
-
-
-def read_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """Keyword arguments of :func:`houghcad.io.read_points` from :func:`add_segment_options`."""
-    return segment_options(args).read_kwargs()
-
-
 def parse_tolerances(items: Sequence[str]) -> dict[str, float]:
     """``["stage.name=value", ...]`` as ``{"stage.name": value}``, checked
     (a bad one is a one-line InputError before the cloud is read)."""
