@@ -198,6 +198,14 @@ def _survivors(values, order, parent, peaks, pers, npk):
     return peaks[:npk], pers[:npk]
 
 
+@kernel(inline="always")
+def _sweep_order(values):
+    """The cells (flat indices) above zero, highest first, ties by cell index. Only those enter
+    a sweep: most of a 3-D accumulator is empty, and sorting every cell was most of its time."""
+    pos = np.nonzero(values > 0)[0]
+    return pos[np.argsort(-values[pos], kind="mergesort")]
+
+
 @kernel("f8[::1], i8[::1], b1[::1], i8[:, ::1]")
 def _persistence_grid(values: np.ndarray, shape: np.ndarray, wrap: np.ndarray, offsets: np.ndarray):
     """0-dimensional persistence of the superlevel sets of a grid function.
@@ -208,10 +216,7 @@ def _persistence_grid(values: np.ndarray, shape: np.ndarray, wrap: np.ndarray, o
     """
     n = values.size
     ndim = shape.size
-    # Only cells above zero enter the sweep, in the same order (stable on the cell index): most
-    # of a 3-D accumulator is empty, and sorting every cell was most of the sweep's time.
-    pos = np.nonzero(values > 0)[0]
-    order = pos[np.argsort(-values[pos], kind="mergesort")]
+    order = _sweep_order(values)
     parent = np.full(n, -1, dtype=np.int64)
     peaks = np.empty(n, dtype=np.int64)
     pers = np.empty(n, dtype=np.float64)
@@ -311,8 +316,7 @@ def smooth(H: np.ndarray, wrap=None) -> np.ndarray:
 def _persistence_graph(values: np.ndarray, indptr: np.ndarray, indices: np.ndarray):
     """Same sweep as :func:`_persistence_grid`, on a cell graph (CSR adjacency)."""
     n = values.size
-    pos = np.nonzero(values > 0)[0]
-    order = pos[np.argsort(-values[pos], kind="mergesort")]
+    order = _sweep_order(values)
     parent = np.full(n, -1, dtype=np.int64)
     peaks = np.empty(n, dtype=np.int64)
     pers = np.empty(n, dtype=np.float64)

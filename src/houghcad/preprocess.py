@@ -144,8 +144,9 @@ class Preprocessed:
     exact: bool = False
     link_scale: np.ndarray | None = None
     off_surface: np.ndarray | None = None
-    #: Neighbour tables read so far, by (k, radius) (see :meth:`neighbours_within`); not
-    #: carried over by ``dataclasses.replace``, which may change the points.
+    #: Neighbour tables read so far, by (k, radius) (see :meth:`neighbours_within`), and point
+    #: pairs, by ("pairs", radius) (:meth:`pairs_within`); not carried over by
+    #: ``dataclasses.replace``, which may change the points.
     _tables: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def neighbours_within(self, k: int, radius: float, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
