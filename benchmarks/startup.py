@@ -101,11 +101,12 @@ def main(argv: list[str] | None = None) -> int:
         seg = [py, "-m", "houghcad", "segment", str(xyz), "-o", str(out), "--quiet"]
         for env in MODES.values():
             _wall(seg, env)  # warm caches
+        libraries, own = med(lambda: _wall([py, "-c", LIBRARIES])), med(_own_import_seconds)
         rows += [("`python -c pass` (the interpreter)", med(lambda: _wall([py, "-c", "pass"]))),
-                 ("the libraries (numpy, scipy's spatial and csgraph)", med(lambda: _wall([py, "-c", LIBRARIES]))),
+                 ("the libraries (numpy, scipy's spatial and csgraph)", libraries),
                  ("the libraries and numba", med(lambda: _wall([py, "-c", LIBRARIES + ", numba"]))),
                  ("`import houghcad.cli, houghcad.pipeline` (libraries included)", med(lambda: _wall([py, "-c", HOUGHCAD]))),
-                 ("of which houghcad's own modules (self import time, `-X importtime`)", med(_own_import_seconds))]
+                 ("of which houghcad's own modules (self import time, `-X importtime`)", own)]
         summary = {}
         for mode, env in MODES.items():
             first = med(lambda: float(subprocess.run([py, "-c", FIRST_CALL], check=True, capture_output=True, text=True,
@@ -122,18 +123,17 @@ def main(argv: list[str] | None = None) -> int:
         exit_s = med(lambda: _exit_seconds(["segment", str(xyz), "-o", str(out), "--quiet"]))
         rows.append(("of which the exit after the command (the interpreter's finalization)", exit_s))
     (wall, work), (jwall, jwork) = summary.values()
-    own = rows[4][1]
     lines = ["| what | median s |", "|---|---|", *(f"| {k} | {v:.3f} |" for k, v in rows), "",
              f"- Fixed cost of a run: {wall - work:.2f} s of the {wall:.2f} s process beside the segmentation's "
              f"{work:.2f} s with the kernels compiled ahead of time ({jwall - jwork:.2f} s of {jwall:.2f} s with "
-             f"numba's JIT); the interpreter and the libraries take {rows[1][1]:.2f} s of it, houghcad's own "
+             f"numba's JIT); the interpreter and the libraries take {libraries:.2f} s of it, houghcad's own "
              f"imports {own:.2f} s (the issue's figure: the code's share under 0.5 s)."]
     publish_section("startup", "Start-up: the fixed cost of a run", "startup.py", argv, [
         f"- Median of {a.repeat} fresh processes each; the 1,000-point cloud is `synth` "
         "`block_with_hole_and_slot` (seed 0) written as XYZ, segmented to JSON with the defaults. "
         "houghcad's modules byte-compiled first, as `pip install .` leaves them.",
     ], lines, not a.no_write, summary=[f"segment of 1,000 points {wall:.2f} s ahead of time, {jwall:.2f} s JIT, "
-                                       f"own imports {own:.2f} s, libraries {rows[1][1]:.2f} s"])
+                                       f"own imports {own:.2f} s, libraries {libraries:.2f} s"])
     return 0
 
 
