@@ -169,7 +169,7 @@ def source_digest() -> int:
 def checked(module: Any) -> Any:
     """``module`` if it was built from the kernels' present source, else None with a warning."""
     built = getattr(module, "source_digest", None)
-    if module is None or (built is not None and built() == source_digest()):
+    if built is not None and built() == source_digest():
         return module
     warnings.warn(f"{AOT_MODULE} was built from other kernel sources than these; numba compiles the "
                   "kernels instead (reinstall houghcad to rebuild it)", RuntimeWarning, stacklevel=2)
