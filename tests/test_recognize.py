@@ -142,6 +142,25 @@ def test_a_candidate_competes_with_every_one_it_would_displace():
     assert [len(c.indices) for c in got] == [100, 100]
 
 
+def test_a_candidate_the_accepted_ones_have_emptied_settles_no_other():
+    # On a noisy part a torus straddling a plane and the faces near it wins its
+    # group against the plane, yet the faces accepted before it hold most of its
+    # points, so it is not accepted: the plane must not go down with it.
+    cloud = synth.single("plane", 0, n_points=2000)
+    ctx = replace(_context(cloud.points), min_points=20)
+    P = ctx.pre.points
+
+    def cand(name, idx):
+        d = np.zeros(len(idx))
+        return Candidate(REGISTRY[name], None, idx, mean_fitting_error(d, P[idx]), d)
+
+    big = np.arange(0, 1000)
+    straddling = np.r_[np.arange(0, 140), np.arange(1000, 1160)]  # 140 of its 300 points taken
+    plane = np.arange(1000, 1200)
+    got = select([cand("plane", big), cand("torus", straddling), cand("plane", plane)], np.ones(len(P), bool), ctx)
+    assert [(c.family.name, len(c.indices)) for c in got] == [("plane", 1000), ("plane", 200)]
+
+
 def test_crease_points_with_wrong_normals_do_not_cut_a_face_in_two():
     # On a narrow face, voted crease normals take the neighbouring faces'
     # planes in places: such points are not the face's inliers, but they lie on

@@ -259,7 +259,8 @@ def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Cand
     the others that share more than 1 − ``keep_share`` of the smaller one's
     points (taking either would leave the other too few to be accepted), and
     among them the lowest MFE wins (a more complex family must beat a simpler
-    one clearly).
+    one clearly). A candidate the accepted ones have left too few free points
+    to be accepted is out of the running.
     """
     cands = compete(cands, ctx)
     keep_share = ctx.tol.recognition.keep_share
@@ -270,12 +271,18 @@ def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Cand
     done = np.zeros(len(cands), bool)
     sets = [c.indices for c in cands]
     accepted = []
+    need = np.array([max(ctx.min_points, keep_share * len(s)) for s in sets])
+    # A candidate whose points the accepted ones hold can no longer be
+    # accepted: it must not win a group and settle the others with it (a band
+    # straddling two noisy surfaces, mostly taken, would take a plane down
+    # with it). Whether each still can changes only when one is accepted.
+    can = np.array([free[s].sum() for s in sets]) >= need
     for i in order:
-        if done[i]:
+        if done[i] or not can[i]:
             continue
         group = [i]
         for j in order:
-            if j == i or done[j]:
+            if j == i or done[j] or not can[j]:
                 continue
             inter = np.intersect1d(sets[i], sets[j], assume_unique=True).size
             # Whichever is taken, the other must keep keep_share of its points
@@ -295,11 +302,10 @@ def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Cand
                 done[j] = True
         c = cands[best]
         left = c.indices[free[c.indices]]
-        if len(left) < max(ctx.min_points, keep_share * len(c.indices)):
-            continue
         c = replace(c, indices=left)
         free[left] = False
         accepted.append(c)
+        can = np.array([free[s].sum() for s in sets]) >= need
     return accepted
 
 
