@@ -117,6 +117,8 @@ class Kernel:
     signatures: tuple[tuple[ArgType, ...], ...]
     options: dict[str, Any]
     compiled: tuple[Callable | None, ...] = ()
+    #: The signature strings as declared (numba's notation), one per entry of ``signatures``.
+    declared: tuple[str, ...] = ()
     _jit: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -211,6 +213,6 @@ def kernel(*signatures: str, **options: Any) -> Callable[[Callable], Any]:
                 REGISTRY.append((f, signatures, dict(options), disp))
             return disp
         compiled = tuple(getattr(_AOT, aot_symbol(f, i), None) for i in range(len(sigs)))
-        return Kernel(f, sigs, dict(options), compiled)
+        return Kernel(f, sigs, dict(options), compiled, signatures)
 
     return wrap

@@ -272,11 +272,15 @@ def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Cand
     sets = [c.indices for c in cands]
     accepted = []
     need = np.array([max(ctx.min_points, keep_share * len(s)) for s in sets])
-    # A candidate whose points the accepted ones hold can no longer be
-    # accepted: it must not win a group and settle the others with it (a band
-    # straddling two noisy surfaces, mostly taken, would take a plane down
-    # with it). Whether each still can changes only when one is accepted.
-    can = np.array([free[s].sum() for s in sets]) >= need
+
+    def acceptable() -> np.ndarray:
+        # A candidate whose points the accepted ones hold can no longer be
+        # accepted: it must not win a group and settle the others with it (a
+        # band straddling two noisy surfaces, mostly taken, would take a plane
+        # down with it). Whether each still can changes only when one is accepted.
+        return np.array([free[s].sum() for s in sets]) >= need
+
+    can = acceptable()
     for i in order:
         if done[i] or not can[i]:
             continue
@@ -305,7 +309,7 @@ def select(cands: list[Candidate], avail: np.ndarray, ctx: Context) -> list[Cand
         c = replace(c, indices=left)
         free[left] = False
         accepted.append(c)
-        can = np.array([free[s].sum() for s in sets]) >= need
+        can = acceptable()
     return accepted
 
 
