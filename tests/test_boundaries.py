@@ -344,6 +344,64 @@ def test_a_sliver_stays_when_its_neighbours_are_neither_larger_nor_of_a_segments
     assert seg.sizes().tolist() == [7, 7, 10]
 
 
+def _face_in_a_row_of_pieces() -> tuple[Segmentation, Context, np.ndarray, np.ndarray, np.ndarray]:
+    """An exact sample of the plane z = 0, x in [0, 1.125], beside a wall z = 0.3 (x - 1.125),
+    x in [1.125, 1.6] (a crease), as the splitting phase can leave it: the face's main piece
+    (x < 1), a strip (x >= 1) larger than a sliver and a sliver in its corner (x >= 1.1,
+    y < 0.25) that touches the strip and the wall only, the strip and
+    the sliver each with a plane of its own tilted across it (off by about 0.1 τ), and the wall
+    exact. The state, its context, and the strip's, the sliver's and the wall's points."""
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0.0, 1.6, 6000)
+    y = rng.uniform(0.0, 1.0, 6000)
+    P = np.column_stack([x, y, np.where(x < 1.125, 0.0, 0.3 * (x - 1.125))])
+    ctx = replace(context(P), min_points=10)
+    X = ctx.pre.points
+    x = P[:, 0]
+    corner = (x >= 1.1) & (x < 1.125) & (P[:, 1] < 0.25)
+    main, strip = np.flatnonzero(x < 1.0), np.flatnonzero((x >= 1.0) & (x < 1.125) & ~corner)
+    sliver, wall = np.flatnonzero(corner), np.flatnonzero(x >= 1.125)
+    fam = REGISTRY["plane"]
+
+    def tilted(idx: np.ndarray) -> Candidate:
+        exact = plane_candidate(ctx, idx)
+        n, c = exact.prim.params["normal"], X[idx].mean(axis=0)
+        across = X[idx[np.argmax(x[idx])]] - X[idx[np.argmin(x[idx])]]
+        across -= (across @ n) * n
+        span = float(np.linalg.norm(across))
+        t = n + 0.2 * ctx.tau / span * across / span
+        t /= np.linalg.norm(t)
+        prim = Primitive("plane", {"normal": t, "offset": float(t @ c), "point": c})
+        return Candidate(fam, prim, idx, 0.0, fam.distance(prim, X[idx]))
+
+    pieces = [plane_candidate(ctx, main), tilted(strip), tilted(sliver), plane_candidate(ctx, wall)]
+    return Segmentation.of(len(P), pieces), ctx, strip, sliver, wall
+
+
+def test_a_face_cut_in_a_row_of_pieces_takes_them_all_back():
+    # The sliver touches only the strip, the strip is larger than a sliver: the exact face takes
+    # the strip because every strip point lies on it to the rounding of an exact fit, which the
+    # strip's own plane does not give, and then the sliver, which it now touches. The wall, as
+    # exact on its own plane, stays.
+    seg, ctx, strip, sliver, wall = _face_in_a_row_of_pieces()
+    assert ctx.pre.exact
+    assert len(strip) >= ctx.tol.boundaries.dissolve_size * ctx.min_points > len(sliver) >= ctx.min_points
+    dissolve_redundant(seg, ctx, max(0.3 * ctx.spacing, ctx.tau), ctx.link)
+    seg.check()
+    assert len(seg) == 2
+    assert (seg.labels[strip] == seg.labels[0]).all() and (seg.labels[sliver] == seg.labels[0]).all()
+    assert (seg.labels[wall] != seg.labels[0]).all()
+
+
+def test_a_larger_piece_stays_where_the_samples_are_not_exact():
+    # The same pieces, the cloud read as noisy samples: the strip is no sliver, and the sliver,
+    # which touches only the strip, which fits it better than the strip's plane, stays too.
+    seg, ctx, strip, sliver, _ = _face_in_a_row_of_pieces()
+    ctx = replace(ctx, pre=replace(ctx.pre, exact=False))
+    dissolve_redundant(seg, ctx, max(0.3 * ctx.spacing, ctx.tau), ctx.link)
+    assert len(seg) == 4
+
+
 def _l_bracket(rng: np.random.Generator) -> tuple[np.ndarray, int]:
     """Two faces meeting at a right-angled crease along the y axis, each sampled with its
     boundary row on the crease (as a CAD sampler does): a floor z = 0, x in [0, 1], and a wall

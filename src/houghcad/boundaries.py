@@ -273,34 +273,49 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
     its own points at least as well and stays. (A face cut in pieces of a few
     points each gives a sliver across them more points than either piece,
     though it fits them worse than both.)
+
+    In rounds, until none is dissolved: a face that the splitting phase cut
+    into a row of pieces touches only the first of them, and reaches the next
+    once it holds that one's points.
     """
+    while _dissolve_round(seg, ctx, delta, reach):
+        pass
+
+
+def _dissolve_round(seg: Segmentation, ctx: Context, delta: float, reach: float) -> bool:
+    """One round of :func:`dissolve_redundant`; whether it dissolved a segment."""
     if len(seg) < 2:
-        return
+        return False
     P = ctx.pre.points
     sizes = seg.sizes()
-    small = np.flatnonzero(sizes < ctx.tol.boundaries.dissolve_size * ctx.min_points)
+    exact = ctx.tol.boundaries.dissolve_exact_taus * ctx.tau if ctx.pre.exact else -1.0
+    small = np.flatnonzero(sizes < (np.inf if ctx.pre.exact else ctx.tol.boundaries.dissolve_size * ctx.min_points))
     if len(small) == 0:
-        return
+        return False
     owner = seg.owner()
     gone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for j in small[np.argsort(sizes[small], kind="stable")]:
         s = seg[j]
         idx = s.indices
+        own = s.family.distance(s.prim, P[idx])
+        large = sizes[j] >= ctx.tol.boundaries.dissolve_size * ctx.min_points
+        if large and own.mean() <= exact:
+            continue  # a face its own primitive fits exactly stays whatever its neighbours fit
         _, nb = ctx.pre.tree.query(P[idx], k=min(ctx.tol.boundaries.neighbours, len(P)), distance_upper_bound=reach)
         nb = nb[nb < len(P)]
         adj = np.unique(owner[nb])
         adj = [int(a) for a in adj
-               if a >= 0 and a != j and a not in gone and (sizes[a] > sizes[j] or sizes[a] >= ctx.min_points)]
+               if a >= 0 and a != j and a not in gone
+               and (sizes[a] > sizes[j] or (not large and sizes[a] >= ctx.min_points))]
         if not adj:
             continue
         d = np.stack([seg[a].family.distance(seg[a].prim, P[idx]) for a in adj])
         near = d.min(axis=0)
-        own = s.family.distance(s.prim, P[idx])
-        if not (near < delta).all() or near.mean() >= own.mean():
+        if not (near < delta).all() or near.mean() >= own.mean() or (large and not (near <= exact).all()):
             continue
         gone[int(j)] = (idx, np.asarray(adj)[d.argmin(axis=0)])
     if not gone:
-        return
+        return False
     add: dict[int, list[np.ndarray]] = {}
     for idx, to in gone.values():
         for a in np.unique(to):
@@ -308,6 +323,7 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
     for a, parts in add.items():
         seg.assign(np.concatenate(parts), a)
     seg.remove(gone)
+    return True
 
 
 def edge_points(seg: Segmentation, ctx: Context) -> list[list[np.ndarray]]:

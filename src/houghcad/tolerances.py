@@ -231,6 +231,9 @@ class BoundaryTolerances:
     sound_fit: float = tol(1.5, "ratio to the median fit", "a primitive fitting worse than this is wrong, and keeps "
                            "the nearest-surface rule")
     dissolve_size: float = tol(3.0, "min_points", "segments smaller than this may be slivers")
+    dissolve_exact_taus: float = tol(0.02, "τ", "exact samples: a segment of any size whose every point lies this "
+                                     "near a larger neighbour's surface (the rounding of an exact fit), which its own "
+                                     "primitive does not fit as closely, is a piece of that surface")
     absorb_neighbours: int = tol(6, "points", "noisy clouds: a leftover point may join the segment of any of this many "
                                  "nearest assigned points (its single nearest may lie across the edge)")
     absorb_rounds: int = tol(50, "rounds", "noisy clouds: absorption walks into a freed region two links a round; it "
