@@ -274,6 +274,12 @@ def dissolve_redundant(seg: Segmentation, ctx: Context, delta: float, reach: flo
     points each gives a sliver across them more points than either piece,
     though it fits them worse than both.)
 
+    On exact samples a larger segment goes too when every point lies on a
+    larger neighbour's surface to the rounding of an exact fit
+    (``dissolve_exact_taus``) and its own primitive does not fit it as
+    closely: a piece of that surface with a wrong primitive. A true face
+    fits its own points exactly and is never one.
+
     In rounds, until none is dissolved: a face that the splitting phase cut
     into a row of pieces touches only the first of them, and reaches the next
     once it holds that one's points.
@@ -289,16 +295,17 @@ def _dissolve_round(seg: Segmentation, ctx: Context, delta: float, reach: float)
     P = ctx.pre.points
     sizes = seg.sizes()
     exact = ctx.tol.boundaries.dissolve_exact_taus * ctx.tau if ctx.pre.exact else -1.0
-    small = np.flatnonzero(sizes < (np.inf if ctx.pre.exact else ctx.tol.boundaries.dissolve_size * ctx.min_points))
-    if len(small) == 0:
+    sliver = ctx.tol.boundaries.dissolve_size * ctx.min_points
+    which = np.flatnonzero(sizes < (np.inf if ctx.pre.exact else sliver))
+    if len(which) == 0:
         return False
     owner = seg.owner()
     gone: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    for j in small[np.argsort(sizes[small], kind="stable")]:
+    for j in which[np.argsort(sizes[which], kind="stable")]:
         s = seg[j]
         idx = s.indices
         own = s.family.distance(s.prim, P[idx])
-        large = sizes[j] >= ctx.tol.boundaries.dissolve_size * ctx.min_points
+        large = sizes[j] >= sliver
         if large and own.mean() <= exact:
             continue  # a face its own primitive fits exactly stays whatever its neighbours fit
         _, nb = ctx.pre.tree.query(P[idx], k=min(ctx.tol.boundaries.neighbours, len(P)), distance_upper_bound=reach)
