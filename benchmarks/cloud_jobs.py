@@ -79,16 +79,16 @@ def main(argv: list[str] | None = None) -> int:
         pts = read_points(str(path)).points
         # Alternate which runs first: a cloud's first run pays the first touch of its memory.
         if i % 2:
-            n_ = _run(pts, a.jobs)
+            many = _run(pts, a.jobs)
             one = _run(pts, 1)
         else:
             one = _run(pts, 1)
-            n_ = _run(pts, a.jobs)
-        same_ = one.result == n_.result
-        rows.append(dict(name=name, n=len(pts), t1=one.wall, tn=n_.wall, cpu1=one.main_cpu + one.workers_cpu,
-                         main_n=n_.main_cpu, cpu_n=n_.main_cpu + n_.workers_cpu, same=same_))
-        print(f"{name:<6} {len(pts):>6} pts  1 job {one.wall:6.2f} s  {a.jobs} jobs {n_.wall:6.2f} s  "
-              f"x{n_.wall / one.wall:.2f}  {'same' if same_ else 'DIFFERENT'}", file=sys.stderr, flush=True)
+            many = _run(pts, a.jobs)
+        same_result = one.result == many.result
+        rows.append(dict(name=name, n=len(pts), t1=one.wall, tn=many.wall, cpu1=one.main_cpu + one.workers_cpu,
+                         main_n=many.main_cpu, cpu_n=many.main_cpu + many.workers_cpu, same=same_result))
+        print(f"{name:<6} {len(pts):>6} pts  1 job {one.wall:6.2f} s  {a.jobs} jobs {many.wall:6.2f} s  "
+              f"x{many.wall / one.wall:.2f}  {'same' if same_result else 'DIFFERENT'}", file=sys.stderr, flush=True)
     t1 = np.array([r["t1"] for r in rows])
     tn = np.array([r["tn"] for r in rows])
     cpu1, cpu_n, main_n = (sum(r[k] for r in rows) for k in ("cpu1", "cpu_n", "main_n"))

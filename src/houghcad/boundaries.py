@@ -294,8 +294,10 @@ def _dissolve_round(seg: Segmentation, ctx: Context, delta: float, reach: float)
         return False
     P = ctx.pre.points
     sizes = seg.sizes()
-    exact = ctx.tol.boundaries.dissolve_exact_taus * ctx.tau if ctx.pre.exact else -1.0
     sliver = ctx.tol.boundaries.dissolve_size * ctx.min_points
+    # Segments larger than a sliver are considered on exact samples only, and only they read
+    # ``exact``: off exact samples it is never read.
+    exact = ctx.tol.boundaries.dissolve_exact_taus * ctx.tau if ctx.pre.exact else -1.0
     which = np.flatnonzero(sizes < (np.inf if ctx.pre.exact else sliver))
     if len(which) == 0:
         return False
