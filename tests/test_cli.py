@@ -104,6 +104,16 @@ def test_help_exits_zero(capsys):
     assert "--fit4cad" in capsys.readouterr().out
 
 
+def test_segment_help_names_every_readable_format(capsys):
+    from houghcad.io.readers import FORMAT_TABLE
+
+    assert main(["segment", "--help"]) == 0
+    out = " ".join(capsys.readouterr().out.split()).upper()  # help lines wrap anywhere
+    for f in FORMAT_TABLE:
+        for ext in f.extensions or (f".{f.name}",):
+            assert ext[1:].upper() in out, f.name
+
+
 @pytest.mark.parametrize("argv,word", [
     ([], "required"),
     (["frobnicate"], "invalid choice"),

@@ -23,6 +23,7 @@ from . import __version__
 from .cliopts import add_segment_options, positive_int, segment_options
 from .errors import InputError
 from .io import PointCloud, read_points, write_fit4cad_primitives, write_json
+from .io.readers import describe_formats
 from .report import summary_table
 
 __all__ = ["main", "build_parser"]
@@ -54,15 +55,16 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``houghcad`` argument parser with its subcommands."""
     parser = _Parser(
         prog=PROG,
-        description="Recognise planes, cylinders, cones, spheres and tori in 3-D point clouds "
-        "of mechanical parts with Hough transforms.",
+        description="Recognise planes, cylinders, cones, spheres and tori, and with --families all "
+        "ellipsoids, helical, revolution and other complex surfaces, in 3-D point clouds of mechanical "
+        "parts with Hough transforms.",
     )
     parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser("segment", help="segment a point cloud into primitives",
-                       description="Segment a point cloud (PLY, XYZ/TXT/CSV/PTS, NPY, OBJ, OFF, STL "
-                       "or Fit4CAD text) and write the result as JSON.")
+                       description=f"Segment a point cloud ({describe_formats()}) and write the "
+                       "result as JSON.")
     p.add_argument("input", metavar="INPUT", help="point-cloud file")
     p.add_argument("-o", "--output", metavar="RESULT.json",
                    help="result file (default: <input stem>_segments.json in the current directory)")

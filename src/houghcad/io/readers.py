@@ -118,6 +118,26 @@ FORMAT_TABLE: tuple[Format, ...] = (
 #: Format names accepted by ``read_points(fmt=...)``.
 FORMATS: tuple[str, ...] = tuple(f.name for f in FORMAT_TABLE)
 
+
+def describe_formats() -> str:
+    """The readable formats as a help text names them, from :data:`FORMAT_TABLE` (so that the
+    text never misses one): formats one reader parses share a label (``"XYZ/TXT/CSV/PTS/ASC"``),
+    a format known by its content alone is named by its name (``"Fit4CAD text"``)."""
+    labels: list[str] = []
+    last = None
+    for f in FORMAT_TABLE:
+        label = "/".join(e[1:].upper() for e in f.extensions) or f"{_DISPLAY.get(f.name, f.name)} text"
+        if f.read is last and labels:
+            labels[-1] += "/" + label
+        else:
+            labels.append(label)
+        last = f.read
+    return ", ".join(labels[:-1]) + " or " + labels[-1] if len(labels) > 1 else labels[0]
+
+
+#: How :func:`describe_formats` writes the names of formats without an extension.
+_DISPLAY = {"fit4cad": "Fit4CAD"}
+
 _BY_NAME = {f.name: f for f in FORMAT_TABLE}
 _EXTENSIONS = {ext: f.name for f in FORMAT_TABLE for ext in f.extensions}
 _MAGIC = tuple(f for f in FORMAT_TABLE if f.magic is not None)
