@@ -119,6 +119,15 @@ FORMAT_TABLE: tuple[Format, ...] = (
 FORMATS: tuple[str, ...] = tuple(f.name for f in FORMAT_TABLE)
 
 
+#: The names of the formats known by their content alone (no extension), as messages write them.
+_CONTENT_ONLY_LABELS = {"fit4cad": "Fit4CAD text"}
+
+
+def _label(f: Format) -> str:
+    """How messages name format ``f``: its extensions (``"LAS/LAZ"``), else its content name."""
+    return "/".join(e[1:].upper() for e in f.extensions) or _CONTENT_ONLY_LABELS.get(f.name, f.name)
+
+
 def describe_formats() -> str:
     """The readable formats as a help text names them, from :data:`FORMAT_TABLE` (so that the
     text never misses one): formats one reader parses share a label (``"XYZ/TXT/CSV/PTS/ASC"``),
@@ -126,17 +135,13 @@ def describe_formats() -> str:
     labels: list[str] = []
     last = None
     for f in FORMAT_TABLE:
-        label = "/".join(e[1:].upper() for e in f.extensions) or f"{_DISPLAY.get(f.name, f.name)} text"
         if f.read is last and labels:
-            labels[-1] += "/" + label
+            labels[-1] += "/" + _label(f)
         else:
-            labels.append(label)
+            labels.append(_label(f))
         last = f.read
     return ", ".join(labels[:-1]) + " or " + labels[-1] if len(labels) > 1 else labels[0]
 
-
-#: How :func:`describe_formats` writes the names of formats without an extension.
-_DISPLAY = {"fit4cad": "Fit4CAD"}
 
 _BY_NAME = {f.name: f for f in FORMAT_TABLE}
 _EXTENSIONS = {ext: f.name for f in FORMAT_TABLE for ext in f.extensions}
@@ -280,7 +285,8 @@ def detect_format(source: str, data: bytes) -> str:
             return fmt.name
     raise InputError(
         f"{source}: unrecognised file format (extension {ext or 'none'!r}; "
-        f"supported: {', '.join(sorted(set(_EXTENSIONS)))} and Fit4CAD text)"
+        f"supported: {', '.join(sorted(set(_EXTENSIONS)))} and "
+        f"{' and '.join(_label(f) for f in FORMAT_TABLE if not f.extensions)})"
     )
 
 
