@@ -107,7 +107,8 @@ class Variant:
 
 
 def variants() -> list[Variant]:
-    """The baseline, each extension pass off, each tolerance at 0.5× and 2×."""
+    """The baseline, each extension pass off, each tolerance at 0.5× and 2× (within the bounds a
+    tolerance declares: a quantile's 2× is 1)."""
     from houghcad.noise import NoisePolicy
     from houghcad.tolerances import Tolerances
 
@@ -124,12 +125,15 @@ def variants() -> list[Variant]:
             if v is None or isinstance(v, bool):
                 continue
             key = f"{stage.name}.{f.name}"
+            least, most = f.metadata.get("least"), f.metadata.get("most")
             for factor in (0.5, 2.0):
                 new = v * factor
+                new = new if most is None else min(new, most)
+                new = new if least is None else max(new, least)
                 if isinstance(v, int):
                     new = max(1, int(round(new)))
-                    if new == v:
-                        continue
+                if new == v:
+                    continue
                 out.append(Variant(f"{key}x{factor:g}", tolerances=((key, new),)))
     return out
 

@@ -197,6 +197,9 @@ def test_same_stem_in_two_folders_is_refused_before_starting(clouds: Path, tmp_p
 @pytest.mark.parametrize("extra,word", [
     (["--workers", "0"], "--workers"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--scheduler"),
+    (["--scheduler", ""], "--scheduler needs an address"),
+    (["--scheduler", "tcp://"], "cannot start the batch"),
+    (["--tolerance", "recognition.neighbours=0"], "must be positive"),
     (["--families", "plane,blob"], "blob"),
     (["--tolerance", "recognition.nonsense=1"], "nonsense"),
     (["--timeout", "-3"], "--timeout"),
@@ -228,6 +231,24 @@ def test_patterns_and_folders_skip_companions_and_duplicates(clouds: Path):
     found = expand_inputs([str(clouds / "part*"), str(clouds / "part0.ply"), str(clouds)])
     names = [Path(d).name for d, _ in found]
     assert names == ["part0.ply", "part1.txt", "part2.ply", "part3.txt", "part4.ply", "broken.ply"]
+
+
+def test_fit4cad_outputs_into_the_clouds_folder_would_replace_their_ground_truth(clouds: Path):
+    truth = (clouds / "part1_primitives.txt").read_bytes()
+    code, _, stderr = _run(["batch", str(clouds / "part1.txt"), "-o", str(clouds), "--fit4cad"])
+    assert code == 2 and stderr.count("\n") == 1 and "part1_primitives.txt" in stderr, stderr
+    assert "refusing to overwrite an input" in stderr
+    assert (clouds / "part1_primitives.txt").read_bytes() == truth
+    assert not (clouds / "part1_segments.json").exists()
+
+
+def test_a_folder_scan_skips_the_batchs_own_summary(tmp_path: Path):
+    from houghcad.batch import expand_inputs
+
+    write_points_ply(tmp_path / "a.ply", synth.block_with_hole_and_slot(seed=0, n_points=300).points)
+    (tmp_path / "summary.csv").write_text("input,status\na.ply,ok\n")
+    (tmp_path / "points.csv").write_text("0,0,0\n1,0,0\n0,1,0\n")
+    assert [Path(d).name for d, _ in expand_inputs([str(tmp_path)])] == ["a.ply", "points.csv"]
 
 
 # --------------------------------------------------------------------------- progress

@@ -220,6 +220,31 @@ def test_output_would_overwrite_input(tmp_path, capsys, fake_pipeline):
     assert inp.read_bytes() == before
 
 
+def test_fit4cad_output_would_overwrite_the_ground_truth_beside_the_input(tmp_path, capsys, fake_pipeline):
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    truth = tmp_path / "part_primitives.txt"
+    truth.write_text("Primitive1:=[1 2 3];\n")
+    assert main(["segment", str(inp), "-o", str(tmp_path / "o.json"), "--fit4cad", str(tmp_path)]) == 2
+    _assert_one_line_error(capsys, "ground truth")
+    assert truth.read_text() == "Primitive1:=[1 2 3];\n" and not fake_pipeline.calls
+
+
+def test_trace_files_would_overwrite_the_input(tmp_path, capsys, fake_pipeline):
+    trace = tmp_path / "trace"
+    trace.mkdir()
+    inp = _write_xyz(trace / "01_recognition.ply.xyz", _blob())  # not a trace file's name: fine
+    assert main(["segment", str(inp), "-o", str(tmp_path / "a.json"), "--trace", str(trace)]) == 0
+    capsys.readouterr()
+    from houghcad.io import write_points_ply
+
+    ply = trace / "01_recognition.ply"
+    write_points_ply(ply, _blob())
+    before = ply.read_bytes()
+    assert main(["segment", str(ply), "-o", str(tmp_path / "b.json"), "--trace", str(trace)]) == 2
+    _assert_one_line_error(capsys, "overwrite the input", "--trace")
+    assert ply.read_bytes() == before
+
+
 def test_oserror_while_writing_becomes_one_line(tmp_path, capsys, monkeypatch, fake_pipeline):
     inp = _write_xyz(tmp_path / "part.xyz", _blob())
     out = tmp_path / "r.json"
@@ -283,6 +308,19 @@ def test_a_closed_pipe_ends_quietly_with_the_outputs_written(tmp_path):
     done = subprocess.run(["bash", "-o", "pipefail", "-c", cmd], capture_output=True, text=True, timeout=300)
     assert done.stderr == "" and done.returncode == 0
     assert json.loads(out.read_text())["n_points"] == len(_parts_cloud())
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_a_full_standard_output_is_one_line_and_exit_2(tmp_path):
+    inp = _write_xyz(tmp_path / "part.xyz", _parts_cloud())
+    out = tmp_path / "r.json"
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([sys.executable, "-m", "houghcad", "segment", str(inp), "-o", str(out)],
+                              stdout=full, stderr=subprocess.PIPE, text=True, timeout=300)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr == "houghcad: error: cannot write to standard output (No space left on device)\n"
+    assert json.loads(out.read_text())["n_points"] == len(_parts_cloud())  # the files were written first
+    assert Path("/dev/full").is_char_device()
 
 
 def test_segment_with_stub_writes_outputs(tmp_path, capsys, monkeypatch, fake_pipeline):
@@ -463,8 +501,11 @@ def test_segment_jobs_reaches_the_pipeline(tmp_path, fake_pipeline):
     (["--tolerance", "recognition.keep_share"], "expected STAGE.NAME=VALUE"),
     (["--tolerance", "splitting.max_rounds=2.5"], "whole number"),
     (["--persistence", "1.5"], "not in (0, 1)"),
-    (["--min-points", "0"], "must be >= 1"),
+    (["--min-points", "1"], "must be >= 2"),
+    (["--min-points", "-5"], "must be >= 2"),  # not ">= 0", as the check for a seed said
     (["--jobs", "0"], "must be >= 1"),
+    (["--jobs", "-5"], "must be >= 1"),
+    (["--tolerance", "scale.max_radius=0"], "must be positive"),
     (["--noise", "loud"], "invalid choice"),
 ])
 def test_segment_bad_tuning_options_exit_2_with_one_line(tmp_path, capsys, fake_pipeline, argv, message):
@@ -509,6 +550,33 @@ def test_segment_ply_keeps_the_input_fields_and_adds_normals_and_distances(tmp_p
     np.testing.assert_allclose(v["distance_sigma"][lab >= 0], v["distance"][lab >= 0] / sigma, rtol=1e-4)
     # Noise-aware: the points lie within a few σ of their surfaces.
     assert 0.3 < np.median(v["distance_sigma"][lab >= 0]) < 2.0
+
+
+def test_segment_ply_keeps_the_input_field_types_and_survives_being_read_again(tmp_path):
+    from plyfile import PlyData
+
+    from houghcad import synth
+    from houghcad.io import write_points_ply
+
+    cloud = synth.block_with_hole_and_slot(seed=1, n_points=3000)
+    n = len(cloud.points)
+    k = np.arange(n)
+    fields = {"big": (4_000_000_000 - k).astype(np.uint32), "time": 1e9 + 1e-3 * k, "flag": (k % 2).astype(np.uint8)}
+    inp = tmp_path / "in.ply"
+    write_points_ply(inp, cloud.points, fields=fields, colors=np.full((n, 3), 7))
+    first, second = tmp_path / "o.ply", tmp_path / "o2.ply"
+    assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "--ply", str(first), "-q"]) == 0
+    v = PlyData.read(str(first))["vertex"].data
+    for name, values in fields.items():  # a u4 stayed u4, an f8 f8: no value changed
+        assert v[name].dtype == values.dtype.newbyteorder("<") or v[name].dtype == values.dtype
+        np.testing.assert_array_equal(v[name], values)
+    assert (v["input_red"] == 7).all()
+    # houghcad's own PLY as an input: its "red" is renamed past the "input_red" it already holds.
+    assert main(["segment", str(first), "-o", str(tmp_path / "r2.json"), "--ply", str(second), "-q"]) == 0
+    w = PlyData.read(str(second))["vertex"].data
+    assert (w["input_red"] == 7).all()
+    np.testing.assert_array_equal(w["input_input_red"], v["red"])
+    np.testing.assert_array_equal(w["input_segment"], v["segment"])
 
 
 def test_demo_real(tmp_path, capsys):

@@ -68,3 +68,13 @@ def test_no_comment_names_a_benchmark_cloud(path):
 
     names = [m.group(0) for m in re.finditer(r"\bPC\d+\b(?!_primitives)", path.read_text())]
     assert not names
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(SRC)))
+def test_no_kd_tree_query_on_scipys_own_threads(path):
+    # scipy's query threads outlive a Ctrl-C that cuts their join short, and the interpreter then
+    # exits under them (a segmentation fault): threaded queries go through normals.tree_query.
+    calls = [node.lineno for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+             and node.func.attr.startswith("query") and any(k.arg == "workers" for k in node.keywords)]
+    assert not calls, f"{path.name}: KD-tree queries with workers= at lines {calls}"

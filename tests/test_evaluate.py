@@ -177,6 +177,7 @@ def test_read_segments_tolerates_spacing_and_sorts_by_k(tmp_path: Path):
         ("Primitive1:=[1 2 x];", "non-integer entry 'x'"),
         ("Primitive1:=[0 1];", "indices are 1-based"),
         ("Primitive1:=[1];Primitive1:=[2];", "appears twice"),
+        ("Primitive1:=[1 2 99999999999999999999999];", "beyond any cloud's size"),
     ],
 )
 def test_read_segments_rejects_bad_files(tmp_path: Path, text: str, msg: str):
@@ -284,6 +285,18 @@ def test_evaluate_files_rejects_bad_results(tmp_path: Path):
         evaluate_files(_result_json(tmp_path, [_arr(0, 9)], 5), gt)
     with pytest.raises(InputError, match="exceeds the result's n_points 2"):
         evaluate_files(_result_json(tmp_path, [_arr(0)], 2), gt)
+    bad.write_text(json.dumps({"n_points": 5, "segments": [{"id": 0, "type": "plane", "indices": [10**30]}]}))
+    with pytest.raises(InputError, match="invalid result"):
+        evaluate_files(bad, gt)
+    bad.write_text(json.dumps({"n_points": 5, "segments": [{"id": 0, "type": "plane", "indices": [0, 1.5]}]}))
+    with pytest.raises(InputError, match="whole numbers"):
+        evaluate_files(bad, gt)
+    bad.write_text(json.dumps({"format": "other-tool", "n_points": 5, "segments": []}))
+    with pytest.raises(InputError, match="not a houghcad result"):
+        evaluate_files(bad, gt)
+    bad.write_text(json.dumps({"format": "houghcad-result", "version": 99, "n_points": 5, "segments": []}))
+    with pytest.raises(InputError, match="version 99"):
+        evaluate_files(bad, gt)
 
 
 def test_evaluate_files_refuses_a_result_of_another_cloud(tmp_path: Path):

@@ -353,13 +353,19 @@ def test_write_points_ply_round_trip(tmp_path, cloud):
     colors = np.tile([0.0, 0.5, 1.0], (N, 1))
     for binary in (True, False):
         path = tmp_path / f"out_{binary}.ply"
-        write_points_ply(path, pts, fields={"segment": labels, "dist": dist}, colors=colors, binary=binary)
+        fields = {"segment": labels, "dist": dist, "near": dist.astype(np.float32), "on": labels >= 0,
+                  "big": np.full(N, 2**40)}
+        write_points_ply(path, pts, fields=fields, colors=colors, binary=binary)
         ply = PlyData.read(str(path))
         v = ply["vertex"]
-        assert [p.name for p in v.properties] == ["x", "y", "z", "segment", "dist", "red", "green", "blue"]
-        assert v.data.dtype["x"] == np.float64 and v.data.dtype["segment"] == np.int32
-        assert v.data.dtype["dist"] == np.float32 and v.data.dtype["red"] == np.uint8
+        assert [p.name for p in v.properties] == ["x", "y", "z", *fields, "red", "green", "blue"]
+        # Each field in its own type where PLY has one; int64 as int32 when it fits, else double.
+        types = {name: v.data.dtype[name] for name in ("x", *fields, "red")}
+        assert types == {"x": np.float64, "segment": np.int32, "dist": np.float64, "near": np.float32,
+                         "on": np.uint8, "big": np.float64, "red": np.uint8}
         np.testing.assert_array_equal(v["segment"], labels)
+        np.testing.assert_array_equal(v["dist"], dist)
+        assert (v["big"] == 2**40).all()
         np.testing.assert_array_equal(np.column_stack([v["red"], v["green"], v["blue"]])[0], [0, 128, 255])
         np.testing.assert_allclose(read_points(path).points, pts, rtol=1e-12, atol=1e-12)
 
@@ -638,6 +644,35 @@ def test_atomic_write_failure_leaves_nothing(tmp_path):
             raise RuntimeError("boom")
     assert path.read_bytes() == b"old"
     assert [p.name for p in tmp_path.iterdir()] == ["out.bin"]
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs named pipes")
+def test_atomic_write_to_a_pipe_writes_into_it_and_keeps_it(tmp_path):
+    # A device or a pipe (/dev/null, a FIFO) is written directly: renaming a
+    # temporary file over it replaced /dev/null itself with a regular file.
+    import threading
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    got: list[bytes] = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()))
+    reader.start()
+    with atomic_write(fifo, "wb") as f:
+        f.write(b"streamed")
+    reader.join(timeout=10)
+    assert got == [b"streamed"]
+    assert fifo.is_fifo()
+    assert [p.name for p in tmp_path.iterdir()] == ["pipe"]
+
+
+def test_atomic_write_to_dev_full_fails_and_dev_null_stays_a_device():
+    if os.path.exists("/dev/full") and os.path.exists("/dev/null"):
+        with pytest.raises(OSError):
+            with atomic_write("/dev/full") as f:
+                f.write("x" * 100_000)
+        with atomic_write("/dev/null") as f:
+            f.write("discarded")
+        assert Path("/dev/null").is_char_device() and Path("/dev/full").is_char_device()
 
 
 def test_atomic_write_missing_directory(tmp_path):

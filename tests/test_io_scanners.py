@@ -60,6 +60,15 @@ def test_pcd_round_trip_with_normals_and_fields(tmp_path, encoding):
     assert read_points(other).points.shape == (N, 3)
 
 
+def test_an_ascii_pcd_cut_short_is_called_truncated(tmp_path):
+    pts, _ = _cloud(1)
+    data = pcd_bytes({"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2]}, "ascii")
+    path = tmp_path / "cut.pcd"
+    path.write_bytes(data[: data.rindex(b"\n", 0, len(data) // 2) + 1])  # whole rows, half of them
+    with pytest.raises(InputError, match=f"truncated PCD file \\(\\d+ of the {N} points"):
+        read_points(path)
+
+
 def test_nan_rows_are_refused_unless_dropped(tmp_path):
     pts, _ = _cloud(2)
     pts[[5, 17, 99]] = np.nan  # an organised cloud's missing points

@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from houghcad import synth
 from houghcad.errors import InputError
 from houghcad.evaluate import classification_measures
-from houghcad.multires import _candidates, voxel_subsample
+from houghcad.multires import _candidates, distinct_points, voxel_subsample
 from houghcad.pipeline import Segmenter
 
 
@@ -141,6 +141,38 @@ def test_points_off_the_surface_inside_a_segment_stay_unsegmented():
     assert np.isin(off, result.unsegmented).mean() >= 0.9  # a few may land near another surface (the hole)
 
 
+def test_distinct_points_and_their_twins():
+    P = np.random.default_rng(0).normal(size=(50, 3))
+    assert distinct_points(P) is None
+    Q = np.vstack([P[:10], P[3:5], P[10:], P[0:1]])
+    d = distinct_points(Q)
+    assert d is not None and d.voxel == 0.0
+    np.testing.assert_array_equal(Q[d.indices], P)  # first occurrences, in input order
+    np.testing.assert_array_equal(Q[d.indices][d.twin], Q)
+    assert d.twin[10] == 3 and d.twin[11] == 4 and d.twin[-1] == 0
+
+
+@pytest.mark.parametrize("copies", [1.0, 0.6])
+def test_exact_copies_take_their_twins_segments(block, copies):
+    # A cloud stored twice over read a spacing of zero: no segment at all, or a crash.
+    P = block.points
+    one = Segmenter(seed=0).fit(P).result_
+    extra = P[: int(copies * len(P))]
+    both = Segmenter(seed=0).fit(np.vstack([P, extra])).result_
+    assert both.options["derived"]["copies"] == len(extra)
+    # The same segments (largest first: copies may reorder them), each holding its points' copies.
+    n = len(P)
+    twins = np.concatenate([np.arange(n), np.arange(len(extra))])
+    same = {s.type: 0 for s in one.segments}
+    for s in both.segments:
+        own = s.indices[s.indices < n]
+        match = [t for t in one.segments if np.array_equal(t.indices, own)]
+        assert len(match) == 1 and match[0].type == s.type
+        np.testing.assert_array_equal(np.sort(twins[s.indices]), np.sort(np.concatenate([own, own[own < len(extra)]])))
+        same[s.type] += 1
+    assert sum(same.values()) == len(one.segments) == len(both.segments)
+
+
 def test_small_clouds_stay_whole_and_bad_sizes_are_refused(block):
     pts = block.points[:3000]
     r = Segmenter(max_points=5000).fit(pts).result_
@@ -160,7 +192,7 @@ def test_cli_options(tmp_path, capsys):
     out = tmp_path / "r.json"
     assert main(["segment", str(path), "-o", str(out), "--max-points", "10", "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "max_points must be a whole number of at least 1000" in err and err.count("\n") == 1
+    assert "--max-points: must be >= 1000, got 10" in err and err.count("\n") == 1  # before reading
     assert not out.exists()
     assert main(["segment", str(path), "-o", str(out), "--max-points", "2000", "--quiet"]) == 0
     doc = json.loads(out.read_text())

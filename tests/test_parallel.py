@@ -160,6 +160,7 @@ def test_resolve_jobs():
     assert resolve_jobs(3) == 3
     assert resolve_jobs(-1) == available_cores()
     assert resolve_jobs(-1000) == 1
+    assert resolve_jobs(1000) == 4 * available_cores()  # not a thousand processes
 
 
 @needs_fork

@@ -271,6 +271,32 @@ def small_part():
     return synth.block_with_hole_and_slot(seed=1, n_points=2500, noise=0.001)
 
 
+@pytest.mark.parametrize("far", ["stray point", "second part"])
+def test_empty_space_in_the_bounding_box_leaves_the_smallest_face_the_parts(far):
+    # The smallest face is a patch 1.5 % of the diagonal wide: a stray point 100 diagonals off,
+    # or a second part as far, made it larger than the whole part, and nothing was segmented.
+    P = synth.block_with_hole_and_slot(seed=0, n_points=8000).points
+    diag = float(np.linalg.norm(np.ptp(P, axis=0)))
+    alone = houghcad.segment(P, seed=0)
+    offset = 100 * diag * np.array([1.0, 0.3, 0.2])
+    Q = np.vstack([P, P.mean(axis=0) + offset]) if far == "stray point" else np.vstack([P, P + offset])
+    both = houghcad.segment(Q, seed=0)
+    assert both.options["derived"]["min_points"] == alone.options["derived"]["min_points"]
+    types = sorted(s.type for s in alone.segments)
+    assert sorted(s.type for s in both.segments) == (types if far == "stray point" else sorted(types * 2))
+    assert len(P) in both.unsegmented or far == "second part"
+
+
+def test_unusable_normals_given_to_the_api_are_estimated_instead(small_part):
+    # As from a file: all-zero normals gave no segment at all.
+    P = small_part.points
+    own = houghcad.segment(P, seed=0)
+    for bad in (np.zeros_like(P), np.vstack([np.zeros((1, 3)), np.tile([0.0, 0.0, 1.0], (len(P) - 1, 1))])):
+        r = houghcad.segment(P, bad, seed=0)
+        assert r.options["normals_used"] == own.options["normals_used"] != "input"
+        assert [s.type for s in r.segments] == [s.type for s in own.segments]
+
+
 def test_segmenter_options_and_result(small_part):
     calls = []
     seg = houghcad.Segmenter(families="plane,cylinder", epsilon=0.02, seed=3, min_points=15,
@@ -309,6 +335,14 @@ def test_segmenter_options_and_result(small_part):
     {"epsilon": 2.0},
     {"persistence": 0.0},
     {"persistence": 1.5},
+    {"min_points": 0},  # these failed deep inside the run, or were taken silently
+    {"min_points": -1},
+    {"min_points": 2.5},
+    {"min_points": True},
+    {"seed": None},
+    {"seed": -1},
+    {"merge": "no"},
+    {"tolerances": "abc"},
 ])
 def test_bad_options_raise_input_error(small_part, kwargs):
     with pytest.raises(InputError):
@@ -351,6 +385,13 @@ def test_a_flat_cloud_is_one_plane():
 
 
 # ---------------------------------------------------------------------------- Result round trip
+
+
+def test_a_results_repr_is_a_line_not_its_index_arrays():
+    r = houghcad.segment(synth.block_with_hole_and_slot(seed=0, n_points=3000).points, seed=0)
+    text = repr(r)
+    assert "\n" not in text and len(text) < 200
+    assert text.startswith(f"Result(n_points=3000, {len(r.segments)} segments (") and "plane" in text
 
 
 def test_result_round_trip_through_json(part_runs):

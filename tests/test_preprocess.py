@@ -457,3 +457,28 @@ def test_link_scale_reads_how_much_sparser_the_sampling_is_around_each_point():
     assert s.dtype == np.float32 and s.shape == (len(xy),) and s.min() >= 1.0
     assert np.median(s[:6000][xy[:6000, 0] < 0.4]) == 1.0
     assert 1.7 < np.median(s[6000:][xy[6000:, 0] > 0.6]) < 2.3
+
+
+def test_an_interrupt_lets_the_running_chunks_finish_and_drops_the_rest():
+    # Ctrl-C while threads share the rows: the interrupt goes on only once no thread is left
+    # inside a chunk (one still running while the interpreter exits crashed it).
+    import _thread
+    import time
+
+    from houghcad.normals import ROWS, by_rows
+
+    done = []
+
+    def chunk(rows: slice) -> int:
+        if rows.start == 0:
+            _thread.interrupt_main()
+        time.sleep(0.05)
+        done.append(rows.start)
+        return rows.start
+
+    with pytest.raises(KeyboardInterrupt):
+        by_rows(chunk, 200 * ROWS, workers=2)
+    finished = len(done)
+    assert 0 < finished < 200  # the running chunks finished, the queued ones were dropped
+    time.sleep(0.3)
+    assert len(done) == finished  # and nothing ran after the interrupt went on

@@ -42,6 +42,12 @@ def test_round_trip_through_a_dict():
     ({"recognition.keep_share": float("nan")}, "finite"),
     ({"recognition.keep_share": None}, "cannot be None"),
     ({"recognition": 0.5}, "stage's dict"),
+    ({"recognition.neighbours": 0}, "must be positive"),  # these broke the run deep inside
+    ({"association.length_tol": 0.0}, "must be positive"),
+    ({"association.angle_tol": -1}, "must be positive"),
+    ({"recognition.refit_points": -1}, "must be positive"),
+    ({"scale.min_points_floor": 1}, "at least 2"),
+    ({"fillets.extent_quantile": 1.5}, "at most 1"),
 ])
 def test_bad_tolerances_are_refused(bad, message):
     with pytest.raises(ValueError, match=message):

@@ -326,6 +326,7 @@ def test_cli_family_file(tmp_path, capsys):
     (None, "no such family file"),
     ("def broken(:\n", "SyntaxError"),
     ("raise RuntimeError('boom')\n", "RuntimeError: boom"),
+    ("import sys\nsys.exit(0)\n", "exited (code 0)"),
     ("import houghcad\nhoughcad.define_family('plane', x='u', y='v', z='a', params=['a'], u_range=(0, 1), "
      "v_range=(0, 1))\n", "built-in"),
 ])

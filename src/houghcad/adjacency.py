@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 
 from .context import Context, threads
 from .state import Segmentation
+from .normals import tree_query
 
 if TYPE_CHECKING:
     from .families import Family
@@ -88,7 +89,7 @@ class SegmentGraph:
                 nb, ok = table[0][owned], table[1][owned]
             else:
                 tree = cKDTree(P) if tree is None else tree
-                dist, nb = tree.query(P[owned], k=min(k, len(P)), distance_upper_bound=link, workers=workers)
+                dist, nb = tree_query(tree, P[owned], workers, k=min(k, len(P)), distance_upper_bound=link)
                 ok = np.isfinite(dist)
             a = np.broadcast_to(owned[:, None], nb.shape)[ok]
             b = nb[ok].astype(np.int64)

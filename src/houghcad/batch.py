@@ -44,6 +44,8 @@ OUTPUT_NAMES = {"fit4cad": "_primitives.txt", "ply": "_segments.ply", "png": "_s
 #: Files that a folder or a pattern holds beside the clouds and that are not clouds: Fit4CAD
 #: ground truth and houghcad's own coloured clouds.
 COMPANIONS = ("_primitives.txt", "_implicit.txt", "_parametric.txt", "_segments.ply")
+#: The batch's own table in its output folder (a CSV file, which the XYZ reader would read).
+SUMMARY_NAME = "summary.csv"
 
 
 @dataclass
@@ -128,7 +130,8 @@ def _is_cloud_name(path: Path) -> bool:
 
     name = path.name.lower()
     extensions = {ext for f in FORMAT_TABLE for ext in f.extensions}
-    return path.suffix.lower() in extensions and not name.endswith(COMPANIONS) and not name.startswith(".")
+    return path.suffix.lower() in extensions and not name.endswith(COMPANIONS) and not name.startswith(".") \
+        and name != SUMMARY_NAME
 
 
 def expand_inputs(inputs: Sequence[str | os.PathLike[str]]) -> list[tuple[str, Path]]:
@@ -174,6 +177,12 @@ def _check_stems(clouds: list[tuple[str, Path]], out_dir: Path, outputs: Sequenc
                              "separate batches")
         by_stem[path.stem] = display
     inputs = {path.resolve(): display for display, path in clouds}
+    # A cloud's ground truth beside it is an input too: --fit4cad into the clouds' own folder
+    # would replace it with the prediction, and then score the prediction against itself.
+    for display, path in clouds:
+        gt = path.with_name(path.stem + COMPANIONS[0])
+        if gt.is_file():
+            inputs[gt.resolve()] = os.path.join(os.path.dirname(display), gt.name)
     for _, path in clouds:
         for kind in outputs:
             out = (out_dir / f"{path.stem}{OUTPUT_NAMES[kind]}").resolve()
@@ -430,7 +439,7 @@ def _engine(client: Any, scheduler: str | None, workers: int | None, retries: in
     engine = Engine(client, scheduler=scheduler, workers=workers, retries=retries, timeout=timeout)
     try:
         engine.__enter__()
-    except (OSError, TimeoutError) as exc:
+    except (OSError, TimeoutError, ValueError) as exc:  # ValueError: an address Dask cannot parse
         raise InputError(f"{scheduler or 'local cluster'}: cannot start the batch ({exc})") from None
     try:
         yield engine

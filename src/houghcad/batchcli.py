@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .batch import OUTPUT_NAMES, BatchRow
-from .cliopts import add_segment_options, non_negative_int, positive_int, segment_options
+from .cliopts import add_segment_options, non_negative_int, path_text, positive_int, segment_options
 from .errors import InputError
 
 __all__ = ["add_batch_parser", "Progress"]
@@ -42,9 +42,9 @@ def add_batch_parser(sub: Any) -> None:
         "'houghcad segment' would, on a local Dask cluster or on a running one, and write "
         "OUTDIR/<stem>_segments.json per cloud, OUTDIR/summary.csv and OUTDIR/index.html. "
         f"Optional outputs per cloud, in OUTDIR: {names}.")
-    p.add_argument("inputs", nargs="+", metavar="INPUT",
+    p.add_argument("inputs", nargs="+", metavar="INPUT", type=path_text,
                    help="point-cloud file, folder (the clouds directly inside) or glob pattern (quote it; ** recurses)")
-    p.add_argument("-o", "--output", metavar="OUTDIR", required=True, help="output folder (created if needed)")
+    p.add_argument("-o", "--output", metavar="OUTDIR", required=True, type=path_text, help="output folder (created if needed)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="address of a running Dask scheduler, e.g. tcp://host:8786; its workers must reach the "
                    "INPUT and OUTDIR paths (default: start a local cluster)")
@@ -141,6 +141,8 @@ def _bokeh_note() -> str:
 def _cmd_batch(args: argparse.Namespace) -> int:
     from .batch import batch
 
+    if args.scheduler is not None and not args.scheduler.strip():
+        raise InputError("--scheduler needs an address, e.g. tcp://host:8786")
     if args.scheduler and args.workers is not None:
         raise InputError("--workers sets the size of the local cluster: not with --scheduler")
     options = segment_options(args)

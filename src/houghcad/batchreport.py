@@ -20,14 +20,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from urllib.parse import quote
 
-from .batch import MEASURES, OUTPUT_NAMES, BatchRow
+from .batch import MEASURES, OUTPUT_NAMES, SUMMARY_NAME, BatchRow
 from .errors import InputError
 from .io import atomic_write
 
 __all__ = ["COLUMNS", "make_out_dir", "read_summary", "write_summary", "summary_csv", "index_html"]
 
 COLUMNS = ("input", "status", "n_points", "n_segments", "unsegmented", "seconds", "error", *MEASURES)
-SUMMARY = "summary.csv"
+SUMMARY = SUMMARY_NAME
 INDEX = "index.html"
 _INTS = ("n_points", "n_segments", "unsegmented")
 _FLOATS = ("seconds", *MEASURES)

@@ -48,6 +48,7 @@ from .multires import voxel_keys
 from .state import SegmentRecord, SegmentView, Segmentation
 from .corners import Arc, FilletFit, Section, fit_fillet, profile_distance, section
 from .tolerances import FilletTolerances
+from .normals import tree_query
 
 
 #: x is a safe helper axis for a basis across n unless n is within 26° of it.
@@ -263,19 +264,19 @@ class _Near:
         full, coarse = self._of(k)
         _, centres, inv = self._voxels(i)
         r, slack, rho = self.reach, np.sqrt(3) * self.h, self.RHO * self.h
-        D = coarse.query(centres, distance_upper_bound=2 * r, workers=self.workers)[0]
+        D = tree_query(coarse, centres, self.workers, distance_upper_bound=2 * r)[0]
         # Per voxel: all its points near the sample (1), all beyond the exact search (0), or mixed.
         state = np.where(D + rho <= r, 1, np.where(D - rho > r + slack, 0, -1))[inv]
         ok = state == 1
         mixed = np.flatnonzero(state < 0)
         if len(mixed):
             X = self.P[idx[mixed]]
-            d = coarse.query(X, distance_upper_bound=2 * r, workers=self.workers)[0]
+            d = tree_query(coarse, X, self.workers, distance_upper_bound=2 * r)[0]
             ok[mixed] = d <= r
             unsure = mixed[(d > r) & (d <= r + slack)]
             if len(unsure):
-                ok[unsure] = np.isfinite(full.query(self.P[idx[unsure]], distance_upper_bound=r,
-                                                    workers=self.workers)[0])
+                ok[unsure] = np.isfinite(tree_query(full, self.P[idx[unsure]], self.workers,
+                                                    distance_upper_bound=r)[0])
         return idx[ok]
 
 

@@ -13,14 +13,16 @@ import gc
 import importlib.resources
 import json
 import os
+import re
 import shutil
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 from . import __version__
-from .cliopts import add_segment_options, positive_int, segment_options
+from .cliopts import add_segment_options, path_text, positive_int, segment_options
 from .errors import InputError
 from .io import PointCloud, read_points, write_fit4cad_primitives, write_json
 from .io.readers import describe_formats
@@ -65,19 +67,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("segment", help="segment a point cloud into primitives",
                        description=f"Segment a point cloud ({describe_formats()}) and write the "
                        "result as JSON.")
-    p.add_argument("input", metavar="INPUT", help="point-cloud file")
-    p.add_argument("-o", "--output", metavar="RESULT.json",
+    p.add_argument("input", metavar="INPUT", type=path_text, help="point-cloud file")
+    p.add_argument("-o", "--output", metavar="RESULT.json", type=path_text,
                    help="result file (default: <input stem>_segments.json in the current directory)")
     add_segment_options(p)
-    p.add_argument("--fit4cad", metavar="DIR",
+    p.add_argument("--fit4cad", metavar="DIR", type=path_text,
                    help="also write DIR/<input stem>_primitives.txt in the Fit4CAD ground-truth format")
-    p.add_argument("--ply", metavar="OUT.ply",
+    p.add_argument("--ply", metavar="OUT.ply", type=path_text,
                    help="also write the cloud as a coloured binary PLY with per-point segment, type and group "
                    "fields (for CloudCompare, MeshLab)")
-    p.add_argument("--png", metavar="OUT.png", help="also draw four views coloured by type and by segment")
-    p.add_argument("--report", metavar="OUT.html",
+    p.add_argument("--png", metavar="OUT.png", type=path_text, help="also draw four views coloured by type and by segment")
+    p.add_argument("--report", metavar="OUT.html", type=path_text,
                    help="also write a self-contained HTML report: interactive 3-D view, tables, timings")
-    p.add_argument("--trace", metavar="DIR",
+    p.add_argument("--trace", metavar="DIR", type=path_text,
                    help="also write the labels after every pass of the pipeline, one PLY per pass named "
                    "NN_PASS.ply, to see where a cloud goes wrong (DIR is created if needed)")
     p.add_argument("--jobs", type=positive_int, default=None, metavar="N",
@@ -90,15 +92,15 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Segment the bundled demo part and write DIR/demo_part_segments.json, "
                        "the coloured cloud DIR/demo_part_segments.ply, the views DIR/demo_part_segments.png "
                        "and the report DIR/demo_part_report.html.")
-    p.add_argument("-o", "--output", metavar="DIR", default=DEMO_DIR_DEFAULT,
+    p.add_argument("-o", "--output", metavar="DIR", default=DEMO_DIR_DEFAULT, type=path_text,
                    help=f"output directory (default: ./{DEMO_DIR_DEFAULT})")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors (and no progress bar)")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("evaluate", help="compare a result with Fit4CAD ground truth",
                        description="Print the Fit4CAD classification measures (DSC first) and MFE statistics.")
-    p.add_argument("result", metavar="RESULT.json", help="file written by 'houghcad segment'")
-    p.add_argument("ground_truth", metavar="GROUND_TRUTH",
+    p.add_argument("result", metavar="RESULT.json", type=path_text, help="file written by 'houghcad segment'")
+    p.add_argument("ground_truth", metavar="GROUND_TRUTH", type=path_text,
                    help="NAME_primitives.txt, or the cloud file NAME.txt/.ply/... next to it")
     p.add_argument("--maximal", action="store_true",
                    help="score the maximal primitives (the JSON's segments) instead of their faces "
@@ -224,13 +226,15 @@ def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | N
     return written
 
 
-def _trace_writer(directory: Path, points: Any) -> Callable[[int, str, Any], None]:
+def _trace_writer(directory: Path, points: Any, inp: Path) -> Callable[[int, str, Any], None]:
     """A ``trace(step, pass_name, state)`` callback writing ``directory/NN_PASS.ply``
-    (the directory is created now, before the run)."""
+    (the directory is created now, before the run); the input ``inp`` is never one of them."""
     from .io.writers import write_trace_ply
 
     if directory.exists() and not directory.is_dir():
         raise InputError(f"{directory}: --trace needs a directory")
+    if re.fullmatch(r"\d{2}_\w+(\.\w+)*\.ply", inp.name) and _same_file(inp, directory / inp.name):
+        raise InputError(f"{inp}: refusing to overwrite the input file with a --trace file (give another folder)")
     _make_dir(directory)
 
     def trace(step: int, name: str, state: Any) -> None:
@@ -265,12 +269,17 @@ def _load_family_files(paths: Sequence[str]) -> None:
             raise InputError(f"{path}: {exc}") from None
         except Exception as exc:  # the user's code: any error is bad input
             raise InputError(f"{path}: cannot load family file ({type(exc).__name__}: {exc})") from None
+        except SystemExit as exc:  # a script's exit() would end the run with no output and no word
+            raise InputError(f"{path}: the family file exited (code {exc.code}) instead of defining families") \
+                from None
 
 
 # --------------------------------------------------------------------------- commands
 
 
 def _cmd_segment(args: argparse.Namespace) -> int:
+    if args.quiet:  # quiet means a silent terminal: the libraries' warnings too
+        warnings.simplefilter("ignore")
     inp = Path(args.input)
     out = Path(args.output) if args.output else Path.cwd() / f"{inp.stem}_segments.json"
     prim = Path(args.fit4cad) / f"{inp.stem}_primitives.txt" if args.fit4cad else None
@@ -289,6 +298,10 @@ def _cmd_segment(args: argparse.Namespace) -> int:
               file=sys.stderr)
     _check_output(out, [inp])
     if prim is not None:
+        truth = inp.with_name(inp.stem + "_primitives.txt")  # the Fit4CAD ground truth beside the cloud
+        if truth.is_file() and _same_file(truth, prim):
+            raise InputError(f"{prim}: refusing to overwrite the ground truth beside the input "
+                             "(give --fit4cad another folder)")
         _check_output(prim, [inp, out], create_parent=True)
     taken = [out] + ([prim] if prim is not None else [])
     for flag, path in views.items():
@@ -303,7 +316,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     kwargs = options.segment_kwargs()
     kwargs["n_jobs"] = args.jobs
     if args.trace:
-        kwargs["trace"] = _trace_writer(Path(args.trace), cloud.points)
+        kwargs["trace"] = _trace_writer(Path(args.trace), cloud.points, inp)
     result = _run_segmentation(cloud, quiet=args.quiet, **kwargs)
     _write(out, write_json, result.to_dict())
     written = [out]
@@ -400,9 +413,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         # The reader of our output went away (`houghcad segment ... | head`):
         # the results are written already; stop quietly. Python would print
         # the error again when it flushes stdout at exit, so point it elsewhere.
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        _silence_stdout()
         return 0
+    except OSError as exc:
+        # Our own files' errors are InputErrors already: this is the terminal's
+        # output failing (`> /dev/full`), after the files were written.
+        _silence_stdout()
+        _error(f"cannot write to standard output ({exc.strerror or exc})")
+        return 2
+
+
+def _silence_stdout() -> None:
+    """Point stdout at the null device: Python flushes it again at exit."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
 
 
 def run() -> int:

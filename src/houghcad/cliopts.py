@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .errors import InputError
+from .options import MIN_MAX_POINTS, MIN_SEGMENT
 
 
 # --------------------------------------------------------------------------- argument types
@@ -37,23 +38,41 @@ def _open_fraction(text: str) -> float:
     return _number_in(text, 1.0, "in (0, 1)")
 
 
-def non_negative_int(text: str) -> int:
-    """``--seed``: a non-negative integer (numpy's requirement)."""
+def path_text(text: str) -> str:
+    """A path option: not empty (``-o ""`` silently wrote the default name in the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("empty path")
+    return text
+
+
+def _int_at_least(text: str, least: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    if value < least:
+        raise argparse.ArgumentTypeError(f"must be >= {least}, got {value}")
     return value
+
+
+def non_negative_int(text: str) -> int:
+    """``--seed``, ``--retries``, ``--scan``: an integer >= 0 (a seed: numpy's requirement)."""
+    return _int_at_least(text, 0)
 
 
 def positive_int(text: str) -> int:
-    """``--min-points``: an integer >= 1."""
-    value = non_negative_int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
+    """``--jobs``, ``--workers``: an integer >= 1."""
+    return _int_at_least(text, 1)
+
+
+def subsample_size(text: str) -> int:
+    """``--max-points``: an integer >= :data:`houghcad.options.MIN_MAX_POINTS`."""
+    return _int_at_least(text, MIN_MAX_POINTS)
+
+
+def segment_size(text: str) -> int:
+    """``--min-points``: an integer >= :data:`houghcad.options.MIN_SEGMENT`."""
+    return _int_at_least(text, MIN_SEGMENT)
 
 
 # --------------------------------------------------------------------------- parser
@@ -63,7 +82,7 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
     """The options that shape a result, shared by ``segment`` and ``batch``."""
     p.add_argument("--families", default="simple", metavar="LIST",
                    help="'simple', 'all' or comma-separated names, e.g. plane,cylinder (default: simple)")
-    p.add_argument("--family-file", action="append", default=[], metavar="FILE.py",
+    p.add_argument("--family-file", action="append", default=[], metavar="FILE.py", type=path_text,
                    help="run a Python file that defines families with houghcad.define_family before segmenting "
                    "(repeatable; it runs unsandboxed: only files you trust); name them in --families")
     p.add_argument("--epsilon", type=_fraction, default=None, metavar="F",
@@ -81,13 +100,13 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
                    "point spacings; 'clean' and 'noisy' force it (default: auto)")
     p.add_argument("--persistence", type=_open_fraction, default=None, metavar="F",
                    help="peak persistence threshold, a fraction of the accumulator's maximum in (0, 1) (default: 0.1)")
-    p.add_argument("--min-points", type=positive_int, default=None, metavar="N",
+    p.add_argument("--min-points", type=segment_size, default=None, metavar="N",
                    help="smallest segment in points (default: a patch 1.5 %% of the diagonal wide, at least 6, "
                         "8 on noisy clouds)")
     p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
                    help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
                    "docs/tolerances.md lists them")
-    p.add_argument("--max-points", type=positive_int, default=None, metavar="N",
+    p.add_argument("--max-points", type=subsample_size, default=None, metavar="N",
                    help="clouds with more points are recognised on an even subsample of at most N points, then "
                    "every point is labelled from its subsample neighbours (default: 100000; at least 1000)")
     p.add_argument("--full-resolution", action="store_true",

@@ -6,11 +6,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .noise import CLEAN, NoisePolicy
 from .preprocess import Preprocessed
 from .tolerances import ScaleTolerances, Tolerances
+from .normals import tree_query
 
 #: Guards divisions by a zero spacing (standard units).
 _TINY = 1e-12
@@ -137,7 +140,7 @@ def neighbour_table(ctx: Context) -> np.ndarray | None:
     if _TABLE and _TABLE[0] is ctx.pre.points and _TABLE[2] == k and _TABLE[1] == key:
         return _TABLE[3]
     P = ctx.pre.points[idx]
-    table = cKDTree(P).query(P, k=k, workers=threads(ctx))[1]
+    table = tree_query(cKDTree(P), P, threads(ctx), k=k)[1]
     _TABLE[:] = [ctx.pre.points, key, k, table]
     return table
 
@@ -146,6 +149,25 @@ def points_in_patch(pre: Preprocessed, width: float) -> float:
     """About how many of the cloud's points a patch of surface ``width`` across holds (standard
     units): at the median density, where a point has 6 neighbours within ``pre.reach``."""
     return REACH_NEIGHBOURS / (np.pi * max(pre.reach, _TINY) ** 2) * width ** 2
+
+
+def part_diagonal(pre: Preprocessed, link: float) -> float:
+    """Bounding-box diagonal (standard units) of the cloud's largest connected piece: its points
+    linked to their ``REACH_NEIGHBOURS`` nearest within ``link``.
+
+    The smallest face is sized on the part, and the cloud's own box can span empty space: one
+    stray point a hundred diagonals off made the smallest face larger than the whole part (and
+    nothing was segmented), and so did a second part placed far away.
+    """
+    n = len(pre.points)
+    k = min(REACH_NEIGHBOURS + 1, n)
+    dist, nbr = pre.tree.query(pre.points, k=k)
+    rows = np.repeat(np.arange(n), k)
+    near = dist.ravel() <= link
+    graph = coo_matrix((np.ones(int(near.sum())), (rows[near], nbr.ravel()[near])), shape=(n, n))
+    _, piece = connected_components(graph, directed=False)
+    largest = piece == np.argmax(np.bincount(piece))
+    return float(np.linalg.norm(np.ptp(pre.points[largest], axis=0)))
 
 
 def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: NoisePolicy,
@@ -168,10 +190,13 @@ def derive_context(pre: Preprocessed, n_points: int, tol: Tolerances, policy: No
     tau = min(tau, eps)
     angle = np.radians(min(t.angle_max_deg, t.angle_deg + t.angle_deg_per_noise * pre.noise / max(s, _TINY)))
     floor = t.noisy_min_points_floor if policy.larger_segments else t.min_points_floor
-    mp = min_points if min_points is not None else \
-        max(floor, int(points_in_patch(pre, t.min_face_diagonals * pre.diagonal)))
-    return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle),
-                   link=max(t.link_spacings * s, t.link_reach * pre.reach) + t.link_sigmas * pre.noise,
+    link = max(t.link_spacings * s, t.link_reach * pre.reach) + t.link_sigmas * pre.noise
+    mp = min_points
+    if mp is None:
+        mp = max(floor, int(points_in_patch(pre, t.min_face_diagonals * pre.diagonal)))
+        if mp > floor:  # only then can the part's own width matter (never on clouds under ~50k points)
+            mp = max(floor, int(points_in_patch(pre, t.min_face_diagonals * part_diagonal(pre, link))))
+    return Context(pre=pre, tau=tau, epsilon=eps, angle=float(angle), link=link,
                    cell=max(tau, t.cell_spacings * s), min_points=int(mp), max_radius=t.max_radius,
                    persistence=float(persistence), max_peaks=t.max_peaks, max_directions=t.max_directions,
                    min_votes=float(mp), seed=int(seed), tol=tol, policy=policy)

@@ -26,7 +26,7 @@ from .groundtruth import (
 )
 from .io import read_points
 from .io.readers import FORMAT_TABLE
-from .result import Result
+from .result import RESULT_VERSION, Result
 
 __all__ = [
     "read_fit4cad_segments",
@@ -354,6 +354,11 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
         raise InputError(f"{rpath}: malformed JSON ({exc.msg} at line {exc.lineno})") from None
     if not isinstance(data, dict):
         raise InputError(f"{rpath}: expected a JSON object, got {type(data).__name__}")
+    if data.get("format", "houghcad-result") != "houghcad-result":
+        raise InputError(f"{rpath}: not a houghcad result (format {data.get('format')!r})")
+    if not isinstance(data.get("version", 2), int) or data.get("version", 2) > RESULT_VERSION:
+        raise InputError(f"{rpath}: result format version {data.get('version')!r}; this houghcad reads "
+                         f"up to {RESULT_VERSION}")
     for key in ("n_points", "segments"):
         if key not in data:
             raise InputError(f"{rpath}: missing key {key!r}")
@@ -361,7 +366,7 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
         result = Result.from_dict(data)
     except KeyError as exc:
         raise InputError(f"{rpath}: a segment lacks key {exc.args[0]!r}") from None
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: an index past int64
         raise InputError(f"{rpath}: invalid result ({exc})") from None
 
     if result.n_points < 0:

@@ -92,7 +92,10 @@ def read_fit4cad_segments(path: str | Path) -> list[np.ndarray]:
         if k in blocks:
             raise InputError(f"{path}: Primitive{k} appears twice")
         # str.split + one numpy conversion: no per-point Python work.
-        idx = np.array(body.replace(",", " ").split(), dtype=np.int64)
+        try:
+            idx = np.array(body.replace(",", " ").split(), dtype=np.int64)
+        except OverflowError:
+            raise InputError(f"{path}: Primitive{k} holds an index beyond any cloud's size") from None
         if idx.size and idx.min() < 1:
             raise InputError(f"{path}: Primitive{k} has index {int(idx.min())}; indices are 1-based")
         blocks[k] = idx - 1

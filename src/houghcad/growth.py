@@ -9,6 +9,7 @@ from scipy.spatial import cKDTree
 
 from .context import Context, threads
 from .state import Candidate, Segmentation, surface_distance
+from .normals import tree_query
 
 
 def grow(seg: Segmentation, k: int, ctx: Context) -> None:
@@ -60,7 +61,7 @@ def absorb(seg: Segmentation, ctx: Context) -> None:
             return
         assigned = np.flatnonzero(seg.labels >= 0)
         k = min(t.absorb_neighbours if inwards else 1, len(assigned))
-        dist, j = cKDTree(P[assigned]).query(P[rest], k=k, distance_upper_bound=2 * ctx.link, workers=threads(ctx))
+        dist, j = tree_query(cKDTree(P[assigned]), P[rest], threads(ctx), k=k, distance_upper_bound=2 * ctx.link)
         dist, j = dist.reshape(len(rest), k), j.reshape(len(rest), k)  # k = 1 gives flat arrays
         ok = np.isfinite(dist)
         pairs = np.unique(np.c_[np.nonzero(ok)[0], seg.labels[assigned[j[ok]]]], axis=0)

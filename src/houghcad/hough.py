@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernels import kernel
+from .normals import tree_query
 
 
 @dataclass(frozen=True)
@@ -368,8 +369,8 @@ class DirectionAccumulator:
     def vote(self, dirs: np.ndarray, weights: np.ndarray | None = None, workers: int = 1) -> np.ndarray:
         """Accumulator values, shape (n_cells,), from unit directions (k, 3); ``workers``: the
         nearest-cell queries' threads (the result does not depend on them)."""
-        _, a = self.tree.query(dirs, workers=workers)
-        _, b = self.tree.query(-dirs, workers=workers)
+        _, a = tree_query(self.tree, dirs, workers)
+        _, b = tree_query(self.tree, -dirs, workers)
         w = None if weights is None else np.concatenate([weights, weights])
         return np.bincount(np.concatenate([a, b]), weights=w, minlength=self.n_cells).astype(np.float64)
 

@@ -31,8 +31,10 @@ from .parallel import resolve_jobs
 from .preprocess import Preprocessed, pca_normals
 from .state import Segmentation, surface_distance
 from .tolerances import ResolutionTolerances
+from .normals import tree_query
 
-__all__ = ["CHUNK", "Subsample", "voxel_keys", "voxel_subsample", "FullResolution", "propagate"]
+__all__ = ["CHUNK", "Subsample", "voxel_keys", "voxel_subsample", "distinct_points", "FullResolution", "propagate",
+           "copy_to_twins"]
 
 #: Points handled at once by the propagation and the normal estimate (bounds the temporary tables).
 CHUNK = 1 << 18
@@ -51,11 +53,15 @@ class Subsample:
     indices : ndarray of int64, shape (m,)
         Sorted indices of the kept points into the input.
     voxel : float
-        Edge of the voxels (input units); one point is kept per occupied voxel.
+        Edge of the voxels (input units); one point is kept per occupied voxel. 0 for the
+        distinct points of a cloud with exact copies (:func:`distinct_points`).
+    twin : ndarray of int64, shape (n,), or None
+        With copies: each input point's position in ``indices`` (its first occurrence's).
     """
 
     indices: np.ndarray
     voxel: float
+    twin: np.ndarray | None = None
 
 
 def voxel_keys(points: np.ndarray, lo: np.ndarray, h: float) -> np.ndarray:
@@ -90,6 +96,34 @@ def voxel_subsample(points: np.ndarray, max_points: int, seed: int = 0) -> Subsa
     return Subsample(indices=np.sort(order[first]).astype(np.int64), voxel=h)
 
 
+#: A fixed direction with no rational relation between its coordinates: equal projections on it
+#: come from equal points (:func:`distinct_points`).
+_HASH_DIRECTION = np.array([1.0, 0.7548776662466927, 0.5698402909980532])
+
+
+def distinct_points(points: np.ndarray) -> Subsample | None:
+    """The distinct points of ``points`` (n, 3), first occurrences in input order, with each
+    point's twin; None when no point repeats another exactly (the usual case, read in one sort
+    of a projection, about 2 ms for 25,000 points).
+
+    Copies add nothing to a surface but break every k-neighbour estimate: a neighbourhood of
+    copies has no extent, so the spacing, the noise and the normals read zero (a cloud stored
+    twice segmented nothing). Recognition runs on the distinct points; each copy then takes its
+    twin's label, normal and part (:func:`copy_to_twins`).
+    """
+    h = np.ascontiguousarray(points, dtype=np.float64) @ _HASH_DIRECTION
+    h.sort()
+    if not (h[1:] == h[:-1]).any():
+        return None
+    _, first, inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
+    if len(first) == len(points):
+        return None
+    keep = np.sort(first)
+    position = np.empty(len(points), dtype=np.int64)
+    position[keep] = np.arange(len(keep))
+    return Subsample(indices=keep.astype(np.int64), voxel=0.0, twin=position[first[inverse.ravel()]])
+
+
 @dataclass
 class FullResolution:
     """The subsample's segmentation carried to every input point (standard frame).
@@ -114,7 +148,7 @@ def _pca_rows(x: np.ndarray, rows: np.ndarray, tree: cKDTree, k: int, flat: floa
     about either face."""
     if len(rows) == 0:
         return np.empty((0, 3)), np.empty(0, dtype=bool)
-    _, nb = tree.query(x[rows], k=k, workers=workers)
+    _, nb = tree_query(tree, x[rows], workers, k=k)
     nrm, ev = pca_normals(x, nb.astype(np.int32), workers=resolve_jobs(workers))
     return nrm, ev[:, 0] <= flat * ev.sum(axis=1)
 
@@ -157,7 +191,7 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
     k = min(tol.neighbours, len(picked))
     for a in range(0, len(x), CHUNK):
         X = x[a:a + CHUNK]
-        _, nb = pre.tree.query(X, k=k, workers=workers)
+        _, nb = tree_query(pre.tree, X, workers, k=k)
         nb = nb.reshape(len(X), k).astype(np.int32)
         lab = sub.labels[nb]
         N, sure = _chunk_normals(x, a, lab, pre.normals[nb[:, 0]], given, full_tree, tol, workers)
@@ -243,3 +277,24 @@ def _pieces(idx: np.ndarray, part: np.ndarray) -> list[np.ndarray]:
     """A segment's points ``idx`` split by their part ids, in part order (no empty piece)."""
     ids = part[idx]
     return [idx[ids == j] for j in np.unique(ids)]
+
+
+def copy_to_twins(sub: Segmentation, pre: Preprocessed, twin: np.ndarray) -> FullResolution:
+    """The segmentation ``sub`` of a cloud's distinct points (:func:`distinct_points`) carried to
+    every input point: a copy has its twin's label, part and normal. ``pre``: the distinct
+    points' preprocessing; ``twin`` (n,): each input point's distinct point."""
+    seg = Segmentation(len(twin))
+    seg.records = list(sub.records)
+    seg.relabel(sub.labels[twin])
+    if sub.parts is not None:
+        part = _part_ids(sub)[twin]
+        seg.parts = [_pieces(seg.indices(s), part) for s in range(len(sub))]
+    seg.groups = list(sub.groups)
+    x = pre.points[twin]
+
+    def each(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else a[twin]
+
+    return FullResolution(seg=seg, pre=replace(pre, points=x, normals=pre.normals[twin], tree=cKDTree(x),
+                                               crease=each(pre.crease), link_scale=each(pre.link_scale),
+                                               off_surface=each(pre.off_surface)))

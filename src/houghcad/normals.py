@@ -7,10 +7,14 @@
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, TypeVar
+import threading
+from concurrent.futures import CancelledError, ThreadPoolExecutor
+from typing import TYPE_CHECKING, Any, Callable, TypeVar
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 from .kernels import kernel
 
@@ -160,8 +164,63 @@ def by_rows(fn: Callable[[slice], T], n: int, workers: int = 1, rows: int = ROWS
     chunks = [slice(s, min(s + rows, n)) for s in range(0, n, rows)] or [slice(0, 0)]
     if workers <= 1 or len(chunks) < 2:
         return [fn(c) for c in chunks]
-    with ThreadPoolExecutor(min(workers, len(chunks))) as ex:
-        return list(ex.map(fn, chunks))
+    gate = _Gate()
+    ex = ThreadPoolExecutor(min(workers, len(chunks)))
+    try:
+        futures = [ex.submit(gate.run, fn, c) for c in chunks]
+        return [f.result() for f in futures]
+    finally:
+        ex.shutdown(wait=False, cancel_futures=True)
+        gate.close()
+
+
+def tree_query(tree: "cKDTree", X: np.ndarray, workers: int = 1, **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``tree.query(X, **kwargs)`` on ``workers`` threads of :func:`by_rows`, rows in chunks.
+
+    Why not scipy's own ``workers``: its threads outlive a Ctrl-C that cuts its join short, and
+    the interpreter then exits under them (a segmentation fault); the query releases the GIL, so
+    ours run as fast, and a query's rows do not depend on each other: the result is the same.
+    """
+    if workers <= 1 or len(X) <= ROWS:
+        return tree.query(X, **kwargs)
+    parts = by_rows(lambda rows: tree.query(X[rows], **kwargs), len(X), workers)
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+class _Gate:
+    """Lets chunks run until closed; closing waits until none is running, even under Ctrl-C,
+    which goes on afterwards. Why not the executor's own join: a Ctrl-C can cut it short, and an
+    interrupted ``Thread.join`` marks a thread still inside a kernel as stopped (CPython 3.11);
+    the interpreter then exits under that thread (a segmentation fault)."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._running = 0
+        self._closed = False
+
+    def run(self, fn: Callable[[slice], T], rows: slice) -> T:
+        with self._cond:
+            if self._closed:
+                raise CancelledError
+            self._running += 1
+        try:
+            return fn(rows)
+        finally:
+            with self._cond:
+                self._running -= 1
+                self._cond.notify_all()
+
+    def close(self) -> None:
+        interrupted = False
+        with self._cond:
+            self._closed = True
+            while self._running:
+                try:
+                    self._cond.wait()
+                except KeyboardInterrupt:
+                    interrupted = True
+        if interrupted:
+            raise KeyboardInterrupt
 
 
 def quadric_residuals(points: np.ndarray, neighbors: np.ndarray, workers: int = 1) -> np.ndarray:

@@ -50,12 +50,18 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
+#: Workers per available core at most: more only share the cores (``--jobs 1000`` forked a
+#: thousand processes); the result is the same for any number.
+MAX_JOBS_PER_CORE = 4
+
+
 def resolve_jobs(n_jobs: int | None) -> int:
-    """``n_jobs`` as a count: None or 0 is every available core, -k is all but k - 1 (at least 1)."""
+    """``n_jobs`` as a count: None or 0 is every available core, -k is all but k - 1 (at least 1),
+    and no more than :data:`MAX_JOBS_PER_CORE` per core."""
     if n_jobs is None or n_jobs == 0:
         return available_cores()
     n = int(n_jobs)
-    return n if n > 0 else max(available_cores() + 1 + n, 1)
+    return min(n, MAX_JOBS_PER_CORE * available_cores()) if n > 0 else max(available_cores() + 1 + n, 1)
 
 
 def can_fork() -> bool:

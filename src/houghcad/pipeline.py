@@ -28,9 +28,10 @@ from .errors import InputError
 from .parallel import Workers, resolve_jobs
 from .planes import prefer_planes
 from .growth import absorb, accept
-from .multires import Subsample, propagate, voxel_subsample
+from .multires import Subsample, copy_to_twins, distinct_points, propagate, voxel_subsample
 from .output import build_segments
-from .noise import NOISE_CHOICES, choose
+from .noise import choose
+from .options import MIN_MAX_POINTS, check_options
 from .preprocess import preprocess
 from .recognize import recognize, refine
 from .result import Result
@@ -40,8 +41,6 @@ from .state import SegmentRecord, Segmentation, checks_enabled
 from .tolerances import Tolerances
 
 
-#: ε, as a fraction of the diagonal, must stay below this.
-MAX_EPSILON = 0.5
 # Progress: the splitting phase reports within its own span (it takes most
 # of the time), the output last.
 _SPLIT_START = 0.3
@@ -51,8 +50,6 @@ _PROPAGATE_AT = 0.93
 #: Clouds above this many points are recognised on an even subsample of this size (our
 #: extension, :mod:`houghcad.multires`); the Fit4CAD clouds (at most 50k points) stay whole.
 DEFAULT_MAX_POINTS = 100_000
-#: A subsample smaller than this no longer holds a mechanical part's small faces.
-MIN_MAX_POINTS = 1000
 #: Coordinates beyond this (units) are refused: the fits sum squared distances, which
 #: overflow float64 (about 1.8e308) long before the coordinates themselves do.
 MAX_COORDINATE = 1e100
@@ -329,6 +326,8 @@ class Segmenter:
 
     def _tolerances(self) -> Tolerances:
         """The run's tolerances: ``tolerances`` with the ``association`` options over them."""
+        if not isinstance(self.tolerances, (Tolerances, dict, type(None))):
+            raise InputError(f"tolerances must be a Tolerances, a dict or None, got {self.tolerances!r}")
         try:
             t = self.tolerances if isinstance(self.tolerances, Tolerances) else \
                 Tolerances.from_dict(self.tolerances)
@@ -342,24 +341,16 @@ class Segmenter:
     def fit(self, points: np.ndarray, normals: np.ndarray | None = None, source: str | None = None) -> "Segmenter":
         """Segment ``points`` (n, 3), world units; ``normals`` (n, 3) optional."""
         from .io import validate_points
+        from .io.readers import clean_normals
 
         points = validate_points(np.asarray(points), source)
         top = float(np.abs(points).max())
         if top > MAX_COORDINATE:
             raise InputError(f"{source or 'input'}: coordinates up to {top:.3g}; beyond "
                              f"{MAX_COORDINATE:g} the fits' squared distances overflow, so rescale the cloud")
-        if normals is not None:
-            normals = np.asarray(normals, dtype=np.float64)
-            if normals.shape != points.shape or not np.isfinite(normals).all():
-                normals = None
-        if self.epsilon is not None and not (0 < float(self.epsilon) < MAX_EPSILON):
-            raise InputError(f"epsilon must be a fraction of the diagonal in (0, 0.5), got {self.epsilon}")
-        if not (0 < float(self.persistence) < 1):
-            raise InputError(f"persistence must be in (0, 1), got {self.persistence}")
-        if self.n_jobs is not None and (isinstance(self.n_jobs, bool) or not isinstance(self.n_jobs, (int, np.integer))):
-            raise InputError(f"n_jobs must be a whole number or None, got {self.n_jobs!r}")
-        if self.noise not in NOISE_CHOICES:
-            raise InputError(f"noise must be one of {', '.join(NOISE_CHOICES)}, got {self.noise!r}")
+        # Unusable normals (wrong shape, non-finite or zero-length rows) are estimated, as a file's.
+        normals = None if clean_normals(normals, len(points)) is None else np.asarray(normals, dtype=np.float64)
+        check_options(self)
         tol = self._tolerances()
         skip = [self.skip] if isinstance(self.skip, str) else list(self.skip)
         unknown = sorted(set(skip) - set(pass_names()))
@@ -427,19 +418,24 @@ class Segmenter:
         return self._result(runner(ASSOCIATION, seg.copy()), run, runner.timing, saved)
 
     def _subsample(self, points: np.ndarray) -> Subsample | None:
-        """The even subsample recognition runs on, or None to run on every point."""
+        """The even subsample recognition runs on, the distinct points of a cloud with exact
+        copies, or None to run on every point."""
         if self.full_resolution or self.max_points is None:
-            return None
+            return distinct_points(points)
         if isinstance(self.max_points, bool) or int(self.max_points) != self.max_points \
                 or self.max_points < MIN_MAX_POINTS:
             raise InputError(f"max_points must be a whole number of at least {MIN_MAX_POINTS}, got {self.max_points!r}")
         if len(points) <= self.max_points:
-            return None
+            return distinct_points(points)
         return voxel_subsample(points, int(self.max_points), self.seed)
 
     def _result(self, seg: Segmentation, run: Run, timing: dict[str, float], saved: _Saved) -> Result:
         points, source, picked = saved.points, saved.source, saved.picked
-        if picked is not None:  # every input point from its subsample neighbours (multires)
+        copies = picked is not None and picked.twin is not None
+        if copies:  # exact copies take their twins' labels
+            full = copy_to_twins(seg, run.ctx.pre, picked.twin)
+            seg, run = full.seg, replace(run, ctx=replace(run.ctx, pre=full.pre))
+        elif picked is not None:  # every input point from its subsample neighbours (multires)
             t = time.perf_counter()
             run.progress("propagate", _PROPAGATE_AT)
             full = propagate(seg, run.ctx, picked.indices, points, saved.normals, run.ctx.tol.resolution,
@@ -452,7 +448,7 @@ class Segmenter:
         distances = np.full(len(points), np.nan)
         # Boundary curves on the cloud recognition ran on; a subsampled cloud's points are not
         # the CAD sample's own (nor on its curves).
-        edges = edge_points(seg, run.ctx) if picked is None else None
+        edges = edge_points(seg, run.ctx) if picked is None or copies else None
         out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed, distances, edges)
         timing = {**timing, "output": time.perf_counter() - t}
         timing["total"] = sum(v for k, v in timing.items() if k != "total")
@@ -466,8 +462,9 @@ class Segmenter:
                                "epsilon": float(ctx.epsilon / ctx.pre.transform.scale),
                                "link": float(ctx.link / ctx.pre.transform.scale),
                                "angle_deg": float(np.degrees(ctx.angle)), "min_points": ctx.min_points,
-                               "subsample_points": None if picked is None else len(picked.indices),
-                               "voxel": None if picked is None else float(picked.voxel)}}
+                               "subsample_points": None if picked is None or copies else len(picked.indices),
+                               "voxel": None if picked is None or copies else float(picked.voxel),
+                               "copies": len(points) - len(picked.indices) if copies else 0}}
         unsegmented = np.flatnonzero(seg.labels < 0).astype(np.int64)
         return Result(n_points=len(points), segments=out, unsegmented=unsegmented, timing=timing,
                       options=options, source=source, groups=groups,

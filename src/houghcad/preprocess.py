@@ -16,7 +16,7 @@ from .errors import InputError
 from .hough import direction_accumulator, refine_direction
 from .noise import NOISY_SPACINGS
 from .noise import choose as choose_policy
-from .normals import ROWS, by_rows, pca_normals, quadric_residuals, voting_normals
+from .normals import ROWS, by_rows, pca_normals, quadric_residuals, tree_query, voting_normals
 from .scales import link_scale, off_surface
 
 __all__ = ["ROWS", "Preprocessed", "Similarity", "by_rows", "pca_normals", "preprocess", "quadric_residuals",
@@ -159,7 +159,7 @@ class Preprocessed:
         key = (int(k), float(radius))
         if key not in self._tables:
             n = len(self.points)
-            dist, nb = self.tree.query(self.points, k=min(int(k), n), distance_upper_bound=radius, workers=workers)
+            dist, nb = tree_query(self.tree, self.points, workers, k=min(int(k), n), distance_upper_bound=radius)
             ok = np.isfinite(dist).reshape(n, -1)
             self._tables[key] = (np.where(ok, nb.reshape(n, -1), 0).astype(np.int32), ok)
         return self._tables[key]
@@ -319,7 +319,7 @@ def _neighbourhoods(x: np.ndarray, k: int, workers: int = 1) -> _Neighbourhoods:
     """k-neighbourhoods of the (n, 3) unit-cube points ``x``, their PCA normals and the noise."""
     tree = cKDTree(x)
     k = int(min(k, len(x)))
-    dist, nbr = tree.query(x, k=k, workers=workers)
+    dist, nbr = tree_query(tree, x, workers, k=k)
     nrm, ev = pca_normals(x, nbr, workers)
     spacing = float(np.median(dist[:, 1]))
     noise, qres, exact = _noise_estimate(x, nbr, ev, k, spacing, workers)
@@ -423,7 +423,7 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
         # WIDE_NORMALS_MAX).
         want = round(NOISE_NEIGHBOURS_PER_SPACING * noise / hood.spacing)
         kk = int(min(np.clip(want, hood.k, WIDE_NORMALS_MAX), len(x)))
-        dist, nbr = hood.tree.query(x, k=kk, workers=workers)
+        dist, nbr = tree_query(hood.tree, x, workers, k=kk)
         nrm, ev = pca_normals(x, nbr, workers)
         # Bounded by the small-neighbourhood estimate: 64 neighbours reach
         # across the edges of thin walls and small features, whose geometry

@@ -13,10 +13,14 @@ Parameter names per family (all vectors are lists of 3 floats, angles in radians
 from __future__ import annotations
 
 import json
+from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+#: The version of the JSON result's layout (its ``"version"``): a reader refuses a newer one.
+RESULT_VERSION = 2
 
 
 @dataclass
@@ -90,12 +94,12 @@ class Segment:
         return cls(
             id=int(d["id"]),
             type=str(d["type"]),
-            indices=np.asarray(d["indices"], dtype=np.int64),
+            indices=_indices(d["indices"]),
             params=dict(d.get("params", {})),
             mfe=float(d.get("mfe", float("nan"))),
             parts=[Part.from_dict(p) for p in d.get("parts", [])],
             descriptors=dict(d.get("descriptors", {})),
-            edges=np.asarray(d.get("edge_indices", []), dtype=np.int64),
+            edges=_indices(d.get("edge_indices", [])),
         )
 
 
@@ -130,9 +134,9 @@ class Part:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Part":
-        return cls(indices=np.asarray(d["indices"], dtype=np.int64), params=dict(d.get("params", {})),
+        return cls(indices=_indices(d["indices"]), params=dict(d.get("params", {})),
                    mfe=float(d.get("mfe", float("nan"))),
-                   edges=np.asarray(d.get("edge_indices", []), dtype=np.int64))
+                   edges=_indices(d.get("edge_indices", [])))
 
 
 def _union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -208,6 +212,13 @@ class Result:
     normals: np.ndarray | None = field(default=None, repr=False, compare=False)
     distances: np.ndarray | None = field(default=None, repr=False, compare=False)
 
+    def __repr__(self) -> str:
+        # A few lines, not every index array (the dataclass's own repr printed them all).
+        kinds = Counter(s.type for s in self.segments)
+        made = ", ".join(f"{n} {t}" for t, n in kinds.most_common())
+        return (f"Result(n_points={self.n_points}, {len(self.segments)} segments ({made or 'none'}), "
+                f"{len(self.unsegmented)} unsegmented, {len(self.groups)} groups, source={self.source!r})")
+
     def labels(self) -> np.ndarray:
         """Per-point segment id, shape (n_points,), -1 for unsegmented points."""
         lab = np.full(self.n_points, -1, dtype=np.int64)
@@ -236,7 +247,7 @@ class Result:
     def to_dict(self) -> dict[str, Any]:
         return {
             "format": "houghcad-result",
-            "version": 2,
+            "version": RESULT_VERSION,
             "source": self.source,
             "n_points": int(self.n_points),
             "segments": [s.to_dict() for s in self.segments],
@@ -251,7 +262,7 @@ class Result:
         return cls(
             n_points=int(d["n_points"]),
             segments=[Segment.from_dict(s) for s in d["segments"]],
-            unsegmented=np.asarray(d.get("unsegmented", []), dtype=np.int64),
+            unsegmented=_indices(d.get("unsegmented", [])),
             timing=dict(d.get("timing", {})),
             options=dict(d.get("options", {})),
             source=d.get("source"),
@@ -282,3 +293,11 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, Family) or (isinstance(x, type) and issubclass(x, Family)):
         return x.name  # Segmenter(families=[obj]) records the family by name
     return x
+
+
+def _indices(values: Any) -> np.ndarray:
+    """Point indices read from JSON as int64; a fraction (1.5 read as 1) is refused."""
+    arr = np.asarray(values)
+    if arr.size and arr.dtype.kind not in "iu":
+        raise ValueError(f"point indices must be whole numbers, got {arr.dtype} values")
+    return arr.astype(np.int64)

@@ -24,9 +24,10 @@ from dataclasses import MISSING, dataclass, field, fields, replace
 from typing import Any
 
 
-def tol(default: Any, unit: str, why: str) -> Any:
-    """A tolerance field: its default, unit and one line saying why."""
-    return field(default=default, metadata={"unit": unit, "why": why})
+def tol(default: Any, unit: str, why: str, least: float | None = None, most: float | None = None) -> Any:
+    """A tolerance field: its default, unit and one line saying why; ``least`` and ``most`` bound
+    the values a user may set (beyond positive, which every tolerance is)."""
+    return field(default=default, metadata={"unit": unit, "why": why, "least": least, "most": most})
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,7 @@ class ScaleTolerances:
     min_points_floor: int = tol(6, "points", "smallest segment: the fewest points that still show a misfit of "
                                 "a plane, sphere or cylinder (3, 4, 5 parameters); 8 lost faces of 6-7 points on "
                                 "sparse clouds (Fit4CAD: every fold up at 6, at full density and at 35 %; 4 "
-                                "over-segments the sparse clouds)")
+                                "over-segments the sparse clouds)", least=2)
     noisy_min_points_floor: int = tol(8, "points", "smallest segment on noisy clouds: a handful of noisy points "
                                       "fits some primitive of its own within the noise")
     min_face_diagonals: float = tol(0.015, "diagonals", "smallest face: a patch this wide, in points at the "
@@ -147,7 +148,7 @@ class RecognitionTolerances:
     dominance_se: float = tol(2.0, "standard errors", "noisy clouds: a more complex candidate explaining more "
                               "points wins when its mean distance is lower by this many standard errors of the "
                               "difference, more than a nesting family's extra freedom gives")
-    neighbours: int = tol(10, "neighbours", "neighbour table handed to the families' placements")
+    neighbours: int = tol(10, "neighbours", "neighbour table handed to the families' placements", least=2)
     tube_centre_share: float = tol(0.5, "share of the normal lines", "a torus placement's tube centre, where the "
                                    "normal lines meet in the meridian plane, that fewer lines pass near is no "
                                    "meeting point: the lines of several tubes (or none) meet at their average")
@@ -199,7 +200,7 @@ class SplittingTolerances:
                                         "along its axis. Two rings of one radius lie on one cylinder only where "
                                         "the part has one, while one ring lies on every cylinder and cone through it")
     crease_neighbours: int = tol(6, "points", "a cluster's crease point takes the PCA normal of this many of the "
-                                 "cluster's points: on a hole a few spacings wide, more reach across it")
+                                 "cluster's points: on a hole a few spacings wide, more reach across it", least=2)
     crease_row_ratio: float = tol(0.05, "eigenvalue ratio", "a neighbourhood whose middle spread is under this share "
                                   "of the largest is one row of points, which no plane fits")
 
@@ -302,7 +303,7 @@ class FilletTolerances:
     coaxial_deg: float = tol(2.0, "degrees", "axes closer than this are one")
     coaxial_taus: float = tol(2.0, "τ", "axis lines this close are one ...")
     coaxial_diagonals: float = tol(0.01, "diagonals", "... or this close")
-    extent_quantile: float = tol(0.9, "quantile", "a face's extent along its ray, robust to strays")
+    extent_quantile: float = tol(0.9, "quantile", "a face's extent along its ray, robust to strays", most=1.0)
     band_share: float = tol(0.5, "share of the shorter extent", "the corner's band along each ray; a radius "
                               "at its end (the band bounds it) is sought again to the shorter face's far end")
     band_before_sigmas: float = tol(3.0, "σ", "points this far before the corner still belong to its band")
@@ -432,7 +433,8 @@ class Tolerances:
 
 
 def _checked(name: str, f: Any, value: Any) -> Any:
-    """``value`` as the field's type (int or float, or None where allowed)."""
+    """``value`` as the field's type (int or float, or None where allowed), positive: every
+    tolerance is a distance, an angle, a count, a share or a ratio (0 or less broke the run)."""
     default = f.default if f.default is not MISSING else None
     if value is None:
         if default is None:
@@ -440,12 +442,19 @@ def _checked(name: str, f: Any, value: Any) -> Any:
         raise ValueError(f"tolerance {name} cannot be None")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"tolerance {name} must be a number, got {value!r}")
+    if not value == value or value in (float("inf"), float("-inf")):
+        raise ValueError(f"tolerance {name} must be finite, got {value!r}")
+    if value <= 0:
+        raise ValueError(f"tolerance {name} must be positive, got {value!r}")
+    least, most = f.metadata.get("least"), f.metadata.get("most")
+    if least is not None and value < least or most is not None and value > most:
+        bounds = " and ".join(x for x in (least is not None and f"at least {least:g}",
+                                          most is not None and f"at most {most:g}") if x)
+        raise ValueError(f"tolerance {name} must be {bounds}, got {value!r}")
     if isinstance(default, int) and not isinstance(default, bool):
         if float(value) != int(value):
             raise ValueError(f"tolerance {name} must be a whole number, got {value!r}")
         return int(value)
-    if not value == value or value in (float("inf"), float("-inf")):
-        raise ValueError(f"tolerance {name} must be finite, got {value!r}")
     return float(value)
 
 
@@ -455,7 +464,8 @@ def markdown() -> str:
              "Every threshold of the pipeline, by stage: its name, unit, default and why. Generated by",
              "`python -m houghcad.tolerances > docs/tolerances.md` from `src/houghcad/tolerances.py`; set them with",
              "`Segmenter(tolerances={\"stage\": {\"name\": value}})` (or `{\"stage.name\": value}`). A run records",
-             "all of them in its JSON `options[\"tolerances\"]`.", ""]
+             "all of them in its JSON `options[\"tolerances\"]`. Every value must be positive; a few have bounds",
+             "besides, given after their default.", ""]
     for f in fields(Tolerances):
         group = f.default_factory()
         lines += [f"## `{f.name}`", "", (type(group).__doc__ or "").strip(), "",
@@ -463,6 +473,9 @@ def markdown() -> str:
         for g in fields(group):
             v = getattr(group, g.name)
             v = f"{v:.6g}" if isinstance(v, float) else str(v)
+            bounds = [f"≥ {g.metadata['least']:g}"] if g.metadata.get("least") is not None else []
+            bounds += [f"≤ {g.metadata['most']:g}"] if g.metadata.get("most") is not None else []
+            v += f" ({', '.join(bounds)})" if bounds else ""
             lines.append(f"| `{g.name}` | {g.metadata['unit']} | {v} | {g.metadata['why']} |")
         lines.append("")
     return "\n".join(lines)

@@ -41,6 +41,9 @@ def read_pcd(data: bytes, source: str) -> Parsed:
     table = np.asarray(table)
     if table.ndim != 2 or table.shape[1] != len(names):
         raise InputError(f"{source}: PCD fields with several values each are not supported")
+    declared = getattr(getattr(pc, "metadata", None), "points", None)
+    if isinstance(declared, int) and len(table) < declared:  # pypcd4 reads what an ascii body holds
+        raise InputError(f"{source}: truncated PCD file ({len(table)} of the {declared} points its header declares)")
     col = {n: table[:, i] for i, n in enumerate(names)}
     points = np.column_stack([col[k] for k in "xyz"]).astype(np.float64)
     normals, names = pick_normals(col)

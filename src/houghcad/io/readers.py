@@ -344,7 +344,7 @@ def validate_points(
         kind = "NaN" if np.isnan(pts[first]).any() else "infinite"
         raise InputError(f"{name}: {kind} coordinate at point {first + 1} of {n}")
     if n < MIN_POINTS:
-        raise InputError(f"{name}: only {n} points, at least {MIN_POINTS} are needed")
+        raise InputError(f"{name}: only {n} point{'' if n == 1 else 's'}, at least {MIN_POINTS} are needed")
 
     problem = _degeneracy(pts)
     if problem:

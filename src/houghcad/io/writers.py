@@ -12,6 +12,7 @@ import contextlib
 import json
 import os
 import secrets
+import stat
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
@@ -39,7 +40,9 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO[A
         Write the whole content to it.  On normal exit the data are flushed,
         fsync'ed and the temporary file is renamed over ``path`` with
         :func:`os.replace` (atomic on POSIX and Windows); on an exception the
-        temporary file is deleted and ``path`` is left untouched.
+        temporary file is deleted and ``path`` is left untouched. An existing
+        ``path`` that is a device or a pipe (``/dev/null``, a FIFO) is written
+        directly: it has no content to keep whole.
 
     Raises
     ------
@@ -49,6 +52,12 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO[A
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_write: mode must be 'w' or 'wb', not {mode!r}")
     dest = Path(path)
+    if _is_special(dest):
+        # A device or a pipe (/dev/null, /dev/stdout, a FIFO): there is nothing to replace
+        # atomically, and a rename over it would replace the device node itself (as root).
+        with open(dest, mode, **({"encoding": "utf-8", "newline": "\n"} if mode == "w" else {})) as f:
+            yield f
+        return
     directory = dest.parent
     # Same directory => same filesystem => os.replace is a rename, not a copy.
     tmp = directory / f".{dest.name}.{secrets.token_hex(6)}.tmp"
@@ -74,6 +83,15 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO[A
         _unlink_quietly(tmp)
         raise
     _fsync_directory(directory)
+
+
+def _is_special(path: Path) -> bool:
+    """Whether ``path`` (links followed) exists and is neither a regular file nor a directory."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 def _unlink_quietly(path: Path) -> None:
@@ -164,8 +182,11 @@ def write_points_ply(
     points : array_like, shape (N, 3)
         Written as float64 ``x, y, z``.
     fields : mapping of name -> array_like, shape (N,), optional
-        Extra scalar properties: integer and boolean arrays become ``int32``,
-        floating arrays ``float32`` (e.g. ``{"segment": labels}``).
+        Extra scalar properties (e.g. ``{"segment": labels}``), in their own
+        type where PLY has it (8 to 32-bit integers, float32, float64);
+        booleans become ``uint8``, 64-bit integers ``int32`` / ``uint32``
+        when their values fit, else ``float64`` (exact to 2^53), ``float16``
+        ``float32``.
     colors : array_like, shape (N, 3), optional
         ``uchar red, green, blue``.  Integer arrays are taken as 0-255
         (clipped); floating arrays as 0-1 (scaled by 255, rounded, clipped).
@@ -188,12 +209,9 @@ def write_points_ply(
         arr = np.asarray(values)
         if arr.shape != (n,):
             raise ValueError(f"field {name!r} must have shape ({n},), got {arr.shape}")
-        if arr.dtype.kind in "iub":
-            columns.append((name, arr.astype(np.int32)))
-        elif arr.dtype.kind == "f":
-            columns.append((name, arr.astype(np.float32)))
-        else:
+        if arr.dtype.kind not in "iubf":
             raise ValueError(f"field {name!r} must be numeric, got dtype {arr.dtype}")
+        columns.append((name, arr.astype(_ply_dtype(arr), copy=False)))
     if colors is not None:
         rgb = _colors_to_uint8(colors, n)
         columns += [("red", rgb[:, 0]), ("green", rgb[:, 1]), ("blue", rgb[:, 2])]
@@ -205,6 +223,26 @@ def write_points_ply(
                   comments=[c.replace("\n", " ") for c in comments])
     with atomic_write(path, "wb") as f:
         ply.write(f)
+
+
+#: The scalar types a PLY property can have (plyfile's names: char ... double).
+_PLY_TYPES = {np.dtype(t) for t in ("i1", "u1", "i2", "u2", "i4", "u4", "f4", "f8")}
+
+
+def _ply_dtype(arr: np.ndarray) -> np.dtype:
+    """The PLY type that holds the values of ``arr`` (numeric, 1-D) exactly where one can."""
+    dt = arr.dtype.newbyteorder("=")
+    if dt in _PLY_TYPES:
+        return dt
+    if dt.kind == "b":
+        return np.dtype(np.uint8)
+    if dt.kind == "f":  # float16 (or longer than double: rounded)
+        return np.dtype(np.float32 if dt.itemsize < 4 else np.float64)
+    narrow = np.dtype(np.int32 if dt.kind == "i" else np.uint32)
+    info = np.iinfo(narrow)
+    if arr.size == 0 or (int(arr.min()) >= info.min and int(arr.max()) <= info.max):
+        return narrow
+    return np.dtype(np.float64)
 
 
 def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: Any,
@@ -247,10 +285,20 @@ def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: A
         sigma = (result.options.get("derived") or {}).get("sigma")
         if sigma:
             ours["distance_sigma"] = result.distances / sigma
-    ours.update(segment=result.labels(), type=point_type_codes(result), group=result.group_labels())
-    reserved = set(ours) | {"x", "y", "z", "red", "green", "blue"}
-    theirs = {(f"input_{k}" if k.lower() in reserved else k): v for k, v in (extra or {}).items()
-              if k.isidentifier() and np.asarray(v).shape == (len(pts),)}
+    ours = {k: np.asarray(v, dtype=np.float32) for k, v in ours.items()}
+    ours.update({k: np.asarray(v, dtype=np.int32) for k, v in
+                 (("segment", result.labels()), ("type", point_type_codes(result)), ("group", result.group_labels()))})
+    taken = set(ours) | {"x", "y", "z", "red", "green", "blue"}
+    kept = {k: v for k, v in (extra or {}).items() if k.isidentifier() and np.asarray(v).shape == (len(pts),)}
+    theirs = {}
+    for k, v in kept.items():
+        # A name the output uses gets "input_" in front, as often as it takes to be free: a
+        # houghcad PLY read again holds both "red" and "input_red".
+        name = k
+        while name.lower() in taken or (name != k and name in kept):
+            name = f"input_{name}"
+        taken.add(name.lower())
+        theirs[name] = v
     write_points_ply(path, pts, fields={**theirs, **ours}, colors=point_colors(result, "segment", pts))
 
 
