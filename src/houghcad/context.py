@@ -19,6 +19,8 @@ from .normals import tree_query
 _TINY = 1e-12
 #: Neighbours within the reach (the median distance to the 6th nearest point, :class:`Preprocessed`).
 REACH_NEIGHBOURS = 6
+#: Rows per chunk of :func:`part_diagonal`'s neighbour query.
+_PIECE_ROWS = 1 << 18
 #: Peak persistence threshold, a fraction of the accumulator's maximum.
 DEFAULT_PERSISTENCE = 0.1
 _SCALE = ScaleTolerances()
@@ -161,10 +163,14 @@ def part_diagonal(pre: Preprocessed, link: float) -> float:
     """
     n = len(pre.points)
     k = min(REACH_NEIGHBOURS + 1, n)
-    dist, nbr = pre.tree.query(pre.points, k=k)
-    rows = np.repeat(np.arange(n), k)
-    near = dist.ravel() <= link
-    graph = coo_matrix((np.ones(int(near.sum())), (rows[near], nbr.ravel()[near])), shape=(n, n))
+    rows, cols = [], []
+    for a in range(0, n, _PIECE_ROWS):  # in chunks: an (n, k) table of a full-resolution scan is GBs
+        dist, nbr = pre.tree.query(pre.points[a:a + _PIECE_ROWS], k=k, distance_upper_bound=link)
+        r, c = np.nonzero(np.isfinite(dist))
+        rows.append((a + r).astype(np.int32))
+        cols.append(nbr[r, c].astype(np.int32))
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(n, n))
     _, piece = connected_components(graph, directed=False)
     largest = piece == np.argmax(np.bincount(piece))
     return float(np.linalg.norm(np.ptp(pre.points[largest], axis=0)))
