@@ -24,6 +24,9 @@ T = TypeVar("T")
 #: makes a chunk for each core, and that a chunk's (rows, k, 6) arrays stay in the cache
 #: (1024 against 8192: the fits of Fit4CAD's clouds 1.3x faster on one thread, 1.4x on two).
 ROWS = 1024
+#: Rows per chunk of a threaded KD-tree query (:func:`tree_query`): a query's own set-up costs more
+#: than a fit's, and its rows need no cache.
+QUERY_ROWS = 8192
 
 
 def pca_normals(points: np.ndarray, neighbors: np.ndarray, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -171,7 +174,8 @@ def by_rows(fn: Callable[[slice], T], n: int, workers: int = 1, rows: int = ROWS
         return [f.result() for f in futures]
     finally:
         ex.shutdown(wait=False, cancel_futures=True)
-        gate.close()
+        gate.close()  # no chunk runs past this
+        ex.shutdown(wait=True)  # nor any idle thread: the run forks its workers, which must not copy one
 
 
 def tree_query(tree: "cKDTree", X: np.ndarray, workers: int = 1, **kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -181,9 +185,9 @@ def tree_query(tree: "cKDTree", X: np.ndarray, workers: int = 1, **kwargs: Any) 
     the interpreter then exits under them (a segmentation fault); the query releases the GIL, so
     ours run as fast, and a query's rows do not depend on each other: the result is the same.
     """
-    if workers <= 1 or len(X) <= ROWS:
+    if workers <= 1 or len(X) <= QUERY_ROWS:
         return tree.query(X, **kwargs)
-    parts = by_rows(lambda rows: tree.query(X[rows], **kwargs), len(X), workers)
+    parts = by_rows(lambda rows: tree.query(X[rows], **kwargs), len(X), workers, QUERY_ROWS)
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
