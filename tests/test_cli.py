@@ -300,6 +300,15 @@ def test_keyboard_interrupt_says_one_line_and_exits_130(tmp_path, capsys, fake_p
     assert not (tmp_path / "r.json").exists()
 
 
+def test_the_command_imports_nothing_heavy_before_it_catches_a_ctrl_c():
+    # A Ctrl-C in the first 0.3 s of a command, while numpy was imported, printed a traceback:
+    # the entry point (and the package it sits in) imports only the standard library first.
+    code = ("import sys, houghcad._console; "
+            "print(sorted(m for m in ('numpy', 'scipy', 'houghcad.cli', 'houghcad.result') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.strip() == "[]", done.stdout + done.stderr
+
+
 def test_a_closed_pipe_ends_quietly_with_the_outputs_written(tmp_path):
     inp = _write_xyz(tmp_path / "part.xyz", _parts_cloud())
     out = tmp_path / "r.json"

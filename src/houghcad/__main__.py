@@ -2,6 +2,6 @@
 
 import sys
 
-from .cli import run
+from ._console import run
 
 sys.exit(run())

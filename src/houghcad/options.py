@@ -5,8 +5,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from .errors import InputError
 from .noise import NOISE_CHOICES
 
@@ -21,11 +19,15 @@ MIN_MAX_POINTS = 1000
 
 
 def _whole(value: Any) -> bool:
+    import numpy as np  # here: the command line imports this module before it can catch a Ctrl-C
+
     return not isinstance(value, (bool, np.bool_)) and isinstance(value, (int, np.integer))
 
 
 def check_options(seg: Any) -> None:
     """Raise InputError for the first bad option of the Segmenter ``seg``."""
+    import numpy as np  # here: the command line imports this module before it can catch a Ctrl-C
+
     if seg.epsilon is not None and not (0 < float(seg.epsilon) < MAX_EPSILON):
         raise InputError(f"epsilon must be a fraction of the diagonal in (0, {MAX_EPSILON:g}), got {seg.epsilon}")
     if not (0 < float(seg.persistence) < 1):
