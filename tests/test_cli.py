@@ -354,6 +354,25 @@ def test_segment_with_stub_writes_outputs(tmp_path, capsys, monkeypatch, fake_pi
     assert inp.read_bytes() == _write_xyz(tmp_path / "again.xyz", _blob(100)).read_bytes()
 
 
+def test_quiet_silences_warnings_for_the_command_only(tmp_path, capsys, fake_pipeline):
+    import warnings
+
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+
+    def warn(n):
+        warnings.warn("a library's warning", RuntimeWarning)
+        return _fake_result(n)
+
+    fake_pipeline.behaviour = warn
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "-q"]) == 0
+        assert not seen
+        warnings.warn("the caller's own", UserWarning)  # the filter is the caller's again
+        assert [str(w.message) for w in seen] == ["the caller's own"]
+    assert capsys.readouterr() == ("", "")
+
+
 def test_quiet_prints_nothing(tmp_path, capsys, fake_pipeline):
     inp = _write_xyz(tmp_path / "part.xyz", _blob())
     assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "--quiet"]) == 0

@@ -278,8 +278,13 @@ def _load_family_files(paths: Sequence[str]) -> None:
 
 
 def _cmd_segment(args: argparse.Namespace) -> int:
-    if args.quiet:  # quiet means a silent terminal: the libraries' warnings too
-        warnings.simplefilter("ignore")
+    with warnings.catch_warnings():  # for this command only: main() also runs inside scripts
+        if args.quiet:  # quiet means a silent terminal: the libraries' warnings too
+            warnings.simplefilter("ignore")
+        return _segment(args)
+
+
+def _segment(args: argparse.Namespace) -> int:
     inp = Path(args.input)
     out = Path(args.output) if args.output else Path.cwd() / f"{inp.stem}_segments.json"
     prim = Path(args.fit4cad) / f"{inp.stem}_primitives.txt" if args.fit4cad else None
