@@ -35,7 +35,7 @@ from .cliopts import SegmentOptions
 from .errors import InputError
 
 __all__ = ["BatchRow", "CloudJob", "SegmentOptions", "batch", "expand_inputs", "plan", "segment_cloud",
-           "OUTPUT_NAMES", "MEASURES"]
+           "OUTPUT_NAMES", "MEASURES", "truth_beside"]
 
 MEASURES = ("DSC", "PPV", "TPR", "TNR", "NPV", "ACC")
 #: File name of each output, after the cloud's stem. "json" is always written.
@@ -125,6 +125,12 @@ class BatchProgress(Protocol):
 # --------------------------------------------------------------------------- inputs
 
 
+def truth_beside(cloud: Path) -> Path | None:
+    """The Fit4CAD ground truth ``NAME_primitives.txt`` beside the cloud ``NAME.<ext>``, if any."""
+    gt = cloud.with_name(cloud.stem + COMPANIONS[0])
+    return gt if gt.is_file() else None
+
+
 def _is_cloud_name(path: Path) -> bool:
     from .io.readers import FORMAT_TABLE
 
@@ -180,8 +186,8 @@ def _check_stems(clouds: list[tuple[str, Path]], out_dir: Path, outputs: Sequenc
     # A cloud's ground truth beside it is an input too: --fit4cad into the clouds' own folder
     # would replace it with the prediction, and then score the prediction against itself.
     for display, path in clouds:
-        gt = path.with_name(path.stem + COMPANIONS[0])
-        if gt.is_file():
+        gt = truth_beside(path)
+        if gt is not None:
             inputs[gt.resolve()] = os.path.join(os.path.dirname(display), gt.name)
     for _, path in clouds:
         for kind in outputs:
@@ -227,9 +233,9 @@ def plan(inputs: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[st
     _check_stems(clouds, out, kinds)
     planned = []
     for display, path in clouds:
-        gt = path.with_name(path.stem + "_primitives.txt")
+        gt = truth_beside(path)
         job = CloudJob(str(path.absolute()), display, str(out), path.stem, kinds, options,
-                       str(gt.absolute()) if gt.is_file() else None)
+                       str(gt.absolute()) if gt is not None else None)
         skipped = None
         if not force and _up_to_date(job):
             before = (previous or {}).get(display)

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from . import __version__
+from .batch import truth_beside
 from .cliopts import add_segment_options, path_text, positive_int, segment_options
 from .errors import InputError
 from .io import PointCloud, read_points, write_fit4cad_primitives, write_json
@@ -303,8 +304,8 @@ def _segment(args: argparse.Namespace) -> int:
               file=sys.stderr)
     _check_output(out, [inp])
     if prim is not None:
-        truth = inp.with_name(inp.stem + "_primitives.txt")  # the Fit4CAD ground truth beside the cloud
-        if truth.is_file() and _same_file(truth, prim):
+        truth = truth_beside(inp)
+        if truth is not None and _same_file(truth, prim):
             raise InputError(f"{prim}: refusing to overwrite the ground truth beside the input "
                              "(give --fit4cad another folder)")
         _check_output(prim, [inp, out], create_parent=True)

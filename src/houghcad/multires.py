@@ -223,14 +223,20 @@ def propagate(sub: Segmentation, ctx: Context, picked: np.ndarray, points: np.nd
     parts_full[picked] = part_of
     if given is None:
         nrm[picked] = pre.normals
-    seg = Segmentation(len(x))
+    return FullResolution(seg=_carried(sub, labels, parts_full),
+                          pre=replace(pre, points=x, normals=nrm, crease=None, link_scale=None, off_surface=None))
+
+
+def _carried(sub: Segmentation, labels: np.ndarray, part: np.ndarray) -> Segmentation:
+    """The segments of ``sub`` (records, groups) over the points ``labels`` (n,) assigns them,
+    each split into parts by ``part`` (n,): the index of a point's part within its segment."""
+    seg = Segmentation(len(labels))
     seg.records = list(sub.records)
     seg.relabel(labels)
     if sub.parts is not None:
-        seg.parts = [_pieces(seg.indices(s), parts_full) for s in range(len(sub))]
+        seg.parts = [_pieces(seg.indices(s), part) for s in range(len(sub))]
     seg.groups = list(sub.groups)
-    return FullResolution(seg=seg, pre=replace(pre, points=x, normals=nrm, crease=None, link_scale=None,
-                                               off_surface=None))
+    return seg
 
 
 def _chunk_normals(x: np.ndarray, a: int, lab: np.ndarray, nearest: np.ndarray, given: np.ndarray | None,
@@ -283,13 +289,7 @@ def copy_to_twins(sub: Segmentation, pre: Preprocessed, twin: np.ndarray) -> Ful
     """The segmentation ``sub`` of a cloud's distinct points (:func:`distinct_points`) carried to
     every input point: a copy has its twin's label, part and normal. ``pre``: the distinct
     points' preprocessing; ``twin`` (n,): each input point's distinct point."""
-    seg = Segmentation(len(twin))
-    seg.records = list(sub.records)
-    seg.relabel(sub.labels[twin])
-    if sub.parts is not None:
-        part = _part_ids(sub)[twin]
-        seg.parts = [_pieces(seg.indices(s), part) for s in range(len(sub))]
-    seg.groups = list(sub.groups)
+    seg = _carried(sub, sub.labels[twin], _part_ids(sub)[twin])
     x = pre.points[twin]
 
     def each(a: np.ndarray | None) -> np.ndarray | None:

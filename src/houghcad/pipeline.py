@@ -432,10 +432,11 @@ class Segmenter:
     def _result(self, seg: Segmentation, run: Run, timing: dict[str, float], saved: _Saved) -> Result:
         points, source, picked = saved.points, saved.source, saved.picked
         copies = picked is not None and picked.twin is not None
+        subsampled = picked is not None and not copies
         if copies:  # exact copies take their twins' labels
             full = copy_to_twins(seg, run.ctx.pre, picked.twin)
             seg, run = full.seg, replace(run, ctx=replace(run.ctx, pre=full.pre))
-        elif picked is not None:  # every input point from its subsample neighbours (multires)
+        elif subsampled:  # every input point from its subsample neighbours (multires)
             t = time.perf_counter()
             run.progress("propagate", _PROPAGATE_AT)
             full = propagate(seg, run.ctx, picked.indices, points, saved.normals, run.ctx.tol.resolution,
@@ -448,7 +449,7 @@ class Segmenter:
         distances = np.full(len(points), np.nan)
         # Boundary curves on the cloud recognition ran on; a subsampled cloud's points are not
         # the CAD sample's own (nor on its curves).
-        edges = edge_points(seg, run.ctx) if picked is None or copies else None
+        edges = None if subsampled else edge_points(seg, run.ctx)
         out, groups = build_segments(seg, seg.groups, run.ctx.pre, points, self.seed, distances, edges)
         timing = {**timing, "output": time.perf_counter() - t}
         timing["total"] = sum(v for k, v in timing.items() if k != "total")
@@ -462,8 +463,8 @@ class Segmenter:
                                "epsilon": float(ctx.epsilon / ctx.pre.transform.scale),
                                "link": float(ctx.link / ctx.pre.transform.scale),
                                "angle_deg": float(np.degrees(ctx.angle)), "min_points": ctx.min_points,
-                               "subsample_points": None if picked is None or copies else len(picked.indices),
-                               "voxel": None if picked is None or copies else float(picked.voxel),
+                               "subsample_points": len(picked.indices) if subsampled else None,
+                               "voxel": float(picked.voxel) if subsampled else None,
                                "copies": len(points) - len(picked.indices) if copies else 0}}
         unsegmented = np.flatnonzero(seg.labels < 0).astype(np.int64)
         return Result(n_points=len(points), segments=out, unsegmented=unsegmented, timing=timing,

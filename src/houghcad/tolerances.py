@@ -447,10 +447,10 @@ def _checked(name: str, f: Any, value: Any) -> Any:
     if value <= 0:
         raise ValueError(f"tolerance {name} must be positive, got {value!r}")
     least, most = f.metadata.get("least"), f.metadata.get("most")
-    if least is not None and value < least or most is not None and value > most:
-        bounds = " and ".join(x for x in (least is not None and f"at least {least:g}",
-                                          most is not None and f"at most {most:g}") if x)
-        raise ValueError(f"tolerance {name} must be {bounds}, got {value!r}")
+    if least is not None and value < least:
+        raise ValueError(f"tolerance {name} must be at least {least:g}, got {value!r}")
+    if most is not None and value > most:
+        raise ValueError(f"tolerance {name} must be at most {most:g}, got {value!r}")
     if isinstance(default, int) and not isinstance(default, bool):
         if float(value) != int(value):
             raise ValueError(f"tolerance {name} must be a whole number, got {value!r}")
