@@ -466,3 +466,41 @@ def test_splat_nearest_point_wins():
     assert tuple(img[0, 0]) == (255, 255, 255)
     assert (img == [255, 255, 255]).all(axis=2).sum() == 21 * 21 - 18
     np.testing.assert_array_equal(img, splat(u, v, depth, colours, 1.0, 21, 1))
+
+
+def test_views_close_the_near_surface():
+    """A randomly sampled square in front of another: with the splat radius from the points'
+    spacing the far one does not show through the near one's gaps (with 1 pixel it did)."""
+    from houghcad.render import _surface, splat, splat_radius
+
+    rng = np.random.default_rng(0)
+    n = 6000
+    near = np.c_[rng.uniform(-1, 1, (n, 2)), np.full(n, 0.5)]
+    far = np.c_[rng.uniform(-1, 1, (n, 2)), np.full(n, -0.5)]
+    P = np.r_[near, far]
+    colours = np.r_[np.tile([[255, 0, 0]], (n, 1)), np.tile([[0, 0, 255]], (n, 1))].astype(np.uint8)
+    spacing, normals = _surface(P)
+    assert np.allclose(np.abs(normals[:, 2]), 1.0, atol=1e-6)
+    size, half = 200, 1.2
+    radius = splat_radius(spacing, half, size)
+    inner = slice(int(size * 0.2), int(size * 0.8))  # well inside the squares' common area
+
+    def blue(r: int) -> float:
+        img = splat(P[:, 0], P[:, 1], P[:, 2], colours, half, size, r)[inner, inner]
+        return float((img == [0, 0, 255]).all(axis=2).mean())
+
+    assert blue(1) > 0.05
+    assert radius > 1 and blue(radius) < min(0.01, blue(1) / 10)
+
+
+def test_shading_tells_faces_apart_and_keeps_colours():
+    from houghcad.render import _LIGHT, shaded
+
+    c = np.array([[200, 100, 50]] * 3, dtype=np.uint8)
+    n = np.array([_LIGHT, [0.0, 0.0, 1.0], np.cross(_LIGHT, [0.0, 0.0, 1.0])])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    out = shaded(c, n).astype(int)
+    assert (out[0] == c[0]).all()  # facing the light: the colour itself
+    assert (out[0] > out[1]).all() and (out[1] > out[2]).all()
+    assert (out[2] >= np.floor(0.55 * c[0])).all()  # edge-on: no darker than the ambient share
+    assert (shaded(c, -n) == shaded(c, n)).all()  # normals are unoriented
