@@ -780,8 +780,16 @@ def test_group_sentences_say_what_the_members_share():
     res = _fake_result(100)
     kinds = [s.type for s in res.segments]
     res.segments[0].type = res.segments[1].type = "plane"
-    assert group_sentence(Group("reflection", [0, 1], {"extent": [1.0, 2.0, 0.5]}), res) == \
-        "2 planes of equal size (1, 2, 0.5), mirrored across a plane"
+    # A plane's size: its two lengths in the plane (the first of its extent runs across it).
+    assert group_sentence(Group("reflection", [0, 1], {"extent": [1e-15, 2.0, 0.5]}), res) == \
+        "2 planes of equal size 2 × 0.5, mirrored across a plane"
+    res.segments[0].type = res.segments[1].type = "cone"
+    assert group_sentence(Group("rotation", [0, 1], {"half_angle": np.pi / 6}), res) == \
+        "2 cones of equal half-angle 30°, repeated by rotation"
+    res.segments[0].type = res.segments[1].type = "torus"
+    assert group_sentence(Group("translation", [0, 1], {"major_radius": 3.0, "minor_radius": 0.5}), res) == \
+        "2 tori of equal radii 3 and 0.5, repeated by translation"
+    res.segments[0].type = res.segments[1].type = "plane"
     assert group_sentence(Group("same_primitive", [0], {"parts": 3}), res) == "one plane in 3 separate parts"
     assert group_sentence(Group("parallel", [0, 1], {"normal": [0, 0, 1.0]}), res) == "2 planes with parallel normals"
     res.segments[1].type = "torus"

@@ -504,3 +504,27 @@ def test_shading_tells_faces_apart_and_keeps_colours():
     assert (out[0] > out[1]).all() and (out[1] > out[2]).all()
     assert (out[2] >= np.floor(0.55 * c[0])).all()  # edge-on: no darker than the ambient share
     assert (shaded(c, -n) == shaded(c, n)).all()  # normals are unoriented
+
+
+def test_report_numbers_drop_rounding_noise():
+    """A CAD plane's normal (8.4e-19, -6.5e-19, 1) reads (0, 0, 1); real small values stay."""
+    from houghcad.htmlreport import _fmt_num
+
+    assert _fmt_num([8.4291e-19, -6.5125e-19, 1.0]) == "(0, 0, 1)"
+    assert _fmt_num(4.8e-17, scale=150.0) == "0"
+    assert _fmt_num(0.0123, scale=150.0) == "0.0123"
+    assert _fmt_num([1e-3, 0.0, 1.0]) == "(0.001, 0, 1)"
+    assert _fmt_num(float("nan"), scale=1.0) == "nan"
+
+
+def test_report_draws_points_as_wide_as_their_spacing():
+    from houghcad.htmlreport import _payload
+    from houghcad.render import sample_spacing
+
+    rng = np.random.default_rng(1)
+    P = np.c_[rng.uniform(0, 10, (4000, 2)), np.zeros(4000)]
+    # The 6th neighbour of a random sample of density 40 per unit area: about sqrt(6 / (pi 40)).
+    assert 0.8 * np.sqrt(6 / (np.pi * 40)) < sample_spacing(P) < 1.2 * np.sqrt(6 / (np.pi * 40))
+    assert sample_spacing(P[:5]) == 0.0
+    pts, res = _hand_result()
+    assert _payload(pts, res, 100_000, np.zeros((len(res.segments), 3), np.uint8))["spacing"] == sample_spacing(pts)

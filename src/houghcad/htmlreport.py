@@ -39,7 +39,7 @@ import numpy as np
 
 from .palette import (UNSEGMENTED_COLOR, group_color, hex_color, segment_colors, segment_edges, type_color,
                       types_present)
-from .render import draw_sample
+from .render import draw_sample, sample_spacing
 from .report import group_sentence
 from .result import GROUP_KINDS, Result
 
@@ -54,24 +54,35 @@ _CSP = ("default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inlin
         "connect-src 'none'; font-src 'none'; form-action 'none'; base-uri 'none'")
 
 
-def _fmt_num(x: Any) -> str:
-    """A parameter value for the tables: 5 significant digits, vectors in parentheses."""
+#: A value within this share of its scale (the part's diagonal, or a vector's largest
+#: component) is shown as 0: a plane's normal (8.4e-19, -6.5e-19, 1) is rounding, not a tilt.
+ROUNDING_SHARE = 1e-9
+
+
+def _fmt_num(x: Any, scale: float = 0.0) -> str:
+    """A parameter value for the tables: 5 significant digits, vectors in parentheses; values
+    within :data:`ROUNDING_SHARE` of ``scale`` (or of a vector's largest component) read 0."""
     if isinstance(x, (list, tuple, np.ndarray)):
-        return "(" + ", ".join(_fmt_num(v) for v in x) + ")"
+        flat = [float(v) for v in x if isinstance(v, (int, float, np.integer, np.floating))
+                and not isinstance(v, (bool, np.bool_)) and math.isfinite(v)]
+        big = max([scale] + [abs(v) for v in flat])
+        return "(" + ", ".join(_fmt_num(v, big) for v in x) + ")"
     if isinstance(x, (bool, np.bool_)):
         return str(bool(x))
     if isinstance(x, (int, np.integer)):
         return str(int(x))
     if isinstance(x, (float, np.floating)):
-        return f"{float(x):.5g}" if math.isfinite(x) else str(float(x))
+        if not math.isfinite(x):
+            return str(float(x))
+        return "0" if abs(float(x)) <= ROUNDING_SHARE * scale else f"{float(x):.5g}"
     if isinstance(x, dict):
-        return "{" + ", ".join(f"{k} {_fmt_num(v)}" for k, v in x.items()) + "}"
+        return "{" + ", ".join(f"{k} {_fmt_num(v, scale)}" for k, v in x.items()) + "}"
     return str(x)
 
 
-def _fmt_params(params: dict[str, Any]) -> str:
-    """``name = value`` lines, HTML-escaped."""
-    return "<br>".join(f"{html.escape(str(k))} = {html.escape(_fmt_num(v))}" for k, v in params.items())
+def _fmt_params(params: dict[str, Any], scale: float = 0.0) -> str:
+    """``name = value`` lines, HTML-escaped; ``scale`` as in :func:`_fmt_num`."""
+    return "<br>".join(f"{html.escape(str(k))} = {html.escape(_fmt_num(v, scale))}" for k, v in params.items())
 
 
 def _jsonable(x: Any) -> Any:
@@ -134,10 +145,13 @@ def _payload(points: np.ndarray, result: Result, max_points: int, seg_rgb: np.nd
         "groups": [{"id": g_id, "kind": g.kind, "members": [int(m) for m in g.members],
                     "color": hex_color(group_color(g_id))} for g_id, g in enumerate(result.groups)],
         "radius": float(max(np.linalg.norm(hi - lo) / 2.0, 1e-12)),
+        # A drawn point's width in the cloud's units: neighbouring points then meet, and the
+        # near side of the part hides the far one (at a fixed 3 pixels it showed through).
+        "spacing": sample_spacing(P),
     }
 
 
-def _segments_table(result: Result, member_of: list[list[int]], seg_rgb: np.ndarray) -> str:
+def _segments_table(result: Result, member_of: list[list[int]], seg_rgb: np.ndarray, scale: float) -> str:
     rows = []
     for s in result.segments:
         mfe = f"{s.mfe:.3e}" if math.isfinite(s.mfe) else "-"
@@ -147,14 +161,14 @@ def _segments_table(result: Result, member_of: list[list[int]], seg_rgb: np.ndar
             f'<td><span class="sw" style="background:{hex_color(seg_rgb[s.id])}"></span>{html.escape(s.type)}</td>'
             f'<td class="num">{len(s.indices)}</td><td class="num">{mfe}</td>'
             f'<td class="num">{len(s.parts) if s.parts else 1}</td>'
-            f'<td class="params">{_fmt_params(s.params)}</td>'
-            f'<td class="params">{_fmt_params(s.descriptors)}</td><td>{groups}</td></tr>')
+            f'<td class="params">{_fmt_params(s.params, scale)}</td>'
+            f'<td class="params">{_fmt_params(s.descriptors, scale)}</td><td>{groups}</td></tr>')
     return ('<table id="segments"><thead><tr><th>id</th><th>type</th><th>points</th><th>MFE</th>'
             '<th>parts</th><th>parameters</th><th>descriptors</th><th>groups</th></tr></thead>'
             f'<tbody>{"".join(rows)}</tbody></table>')
 
 
-def _groups_table(result: Result) -> str:
+def _groups_table(result: Result, scale: float) -> str:
     if not result.groups:
         return '<p id="no-groups">No groups: the association step found no relation between segments, or was off.</p>'
     order = sorted(range(len(result.groups)),
@@ -167,7 +181,7 @@ def _groups_table(result: Result) -> str:
                     f'<td><span class="sw" style="background:{hex_color(group_color(g_id))}"></span>'
                     f'{html.escape(g.kind)}</td><td>{", ".join(str(int(m)) for m in g.members)}</td>'
                     f'<td>{html.escape(group_sentence(g, result))}</td>'
-                    f'<td class="params">{_fmt_params(g.descriptors)}</td></tr>')
+                    f'<td class="params">{_fmt_params(g.descriptors, scale)}</td></tr>')
     return ('<table id="groups"><thead><tr><th>id</th><th>kind</th><th>members</th><th>what</th>'
             f'<th>shared descriptors</th></tr></thead><tbody>{"".join(rows)}</tbody></table>')
 
@@ -272,11 +286,11 @@ def build_html_report(points: np.ndarray, result: Result, *, title: str | None =
 <div id="plot"><canvas id="view"></canvas><canvas id="triad" width="72" height="72"></canvas>
 <div id="pick"></div>
 <div id="toolbar"><button id="view-iso" type="button">iso</button><button id="view-top" type="button">top</button><button id="view-front" type="button">front</button><button id="view-side" type="button">side</button><button id="save" type="button">save PNG</button>
-<label>point size <input id="size" type="range" min="1" max="8" step="0.5" value="3"></label></div>
+<label>point size <input id="size" type="range" min="0.25" max="3" step="0.25" value="1"></label></div>
 <div id="help">drag: rotate, shift/right drag: pan, wheel: zoom, click: identify, double click: reset</div></div>
 </div>
-<section><h2>Segments</h2>{_segments_table(result, member_of, seg_rgb)}</section>
-<section><h2>Groups</h2>{_groups_table(result)}</section>
+<section><h2>Segments</h2>{_segments_table(result, member_of, seg_rgb, 2.0 * data['radius'])}</section>
+<section><h2>Groups</h2>{_groups_table(result, 2.0 * data['radius'])}</section>
 <section><h2>Timing</h2>{_timing_table(result)}</section>
 <script type="application/json" id="houghcad-data">{data_json}</script>
 <script>

@@ -81,6 +81,20 @@ def _plural(type_name: str, n: int) -> str:
     return name if n == 1 else _PLURAL.get(type_name, name + "s")
 
 
+def _shape_value(type_name: str, d: dict, key: str) -> str:
+    """The shape descriptor ``d[key]`` in words a reader expects: a plane's size as its two
+    lengths in the plane (its extent's first, across the plane, is only rounding on a CAD
+    face), a cone's half-angle in degrees, a torus's two radii."""
+    v = d[key]
+    if type_name == "plane" and isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3:
+        return f"{_fmt_descriptor(v[1])} × {_fmt_descriptor(v[2])}"
+    if type_name == "cone":
+        return f"{float(np.degrees(float(v))):.4g}°"
+    if type_name == "torus" and "minor_radius" in d:
+        return f"{_fmt_descriptor(v)} and {_fmt_descriptor(d['minor_radius'])}"
+    return _fmt_descriptor(v)
+
+
 def group_sentence(group, result: Result) -> str:
     """A plain-language line for an association group, e.g. "6 cylinders of
     equal radius 2.5, repeated by translation"."""
@@ -90,7 +104,7 @@ def group_sentence(group, result: Result) -> str:
     d = group.descriptors
     if group.kind in _HOW:
         key, word = _SHAPE_WORDS.get(t, (None, "shape"))
-        shape = f"equal {word} {_fmt_descriptor(d[key])}" if key in d else "equal shape"
+        shape = f"equal {word} {_shape_value(t, d, key)}" if key in d else "equal shape"
         return f"{n} {_plural(t, n)} of {shape}, {_HOW[group.kind]}"
     if group.kind == "same_primitive":
         parts = d.get("parts")

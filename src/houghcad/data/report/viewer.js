@@ -22,7 +22,11 @@
   var prog = gl.createProgram();
   gl.attachShader(prog, shader(gl.VERTEX_SHADER,
     "attribute float ax; attribute float ay; attribute float az; uniform mat4 mvp; uniform float size;" +
-    "void main() { gl_Position = mvp * vec4(ax, ay, az, 1.0); gl_PointSize = size; }"));
+    "uniform float wsize;" +
+    // A point is as wide as the points' spacing at its depth (wsize / w pixels), at least
+    // `size` pixels: the surface closes and hides what lies behind it at any zoom.
+    "void main() { gl_Position = mvp * vec4(ax, ay, az, 1.0);" +
+    " gl_PointSize = max(size, wsize / gl_Position.w); }"));
   gl.attachShader(prog, shader(gl.FRAGMENT_SHADER,
     "precision mediump float; uniform vec3 color;" +
     "void main() { vec2 d = gl_PointCoord - 0.5; if (dot(d, d) > 0.25) discard; gl_FragColor = vec4(color, 1.0); }"));
@@ -37,6 +41,7 @@
     gl.vertexAttribPointer(loc, 1, gl.FLOAT, false, 0, a * n * 4);
   });
   var uMvp = gl.getUniformLocation(prog, "mvp"), uSize = gl.getUniformLocation(prog, "size"),
+      uWsize = gl.getUniformLocation(prog, "wsize"),
       uColor = gl.getUniformLocation(prog, "color");
   gl.enable(gl.DEPTH_TEST);
   gl.clearColor(1, 1, 1, 1);
@@ -98,7 +103,8 @@
   }
   var colors = {};
   function rgb(hex) { return [1, 3, 5].map(function (k) { return parseInt(hex.substr(k, 2), 16) / 255; }); }
-  var pointSize = 3, pending = false, mvp = null;
+  // The slider scales the points' width (1: their spacing); 1.5 pixels at least.
+  var pointSize = 1, pending = false, mvp = null;
   function draw() {
     pending = false;
     var dpr = window.devicePixelRatio || 1, w = Math.round(canvas.clientWidth * dpr),
@@ -108,7 +114,9 @@
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
     mvp = mvpMatrix();
     gl.uniformMatrix4fv(uMvp, false, mvp);
-    gl.uniform1f(uSize, pointSize * dpr);
+    gl.uniform1f(uSize, 1.5 * dpr);
+    // Pixels of one world unit at clip depth w = 1: the projection's y scale times half the height.
+    gl.uniform1f(uWsize, pointSize * (D.spacing || 0) * scales()[1] * canvas.height / 2);
     D.traces.forEach(function (t) {
       if (!t.visible || !t.drawn) return;
       gl.uniform3fv(uColor, rgb(t["color_" + mode]));
