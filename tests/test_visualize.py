@@ -255,7 +255,8 @@ def test_html_report_size_for_50k_points():
     text = build_html_report(pts, res)
     assert _embedded(text)["n_drawn"] == n
     size = len(text.encode("utf-8"))
-    assert size < 16 * n + 200_000  # 12 bytes of float32 per point, base64: ~0.85 MB, far below 15 MB
+    # 12 bytes of float32 and 3 of int8 normals per point, base64: ~1.05 MB, far below 15 MB
+    assert size < 20 * n + 200_000
 
 
 def test_html_report_subsamples_huge_clouds():
@@ -471,7 +472,7 @@ def test_splat_nearest_point_wins():
 def test_views_close_the_near_surface():
     """A randomly sampled square in front of another: with the splat radius from the points'
     spacing the far one does not show through the near one's gaps (with 1 pixel it did)."""
-    from houghcad.render import _surface, splat, splat_radius
+    from houghcad.render import local_surface, splat, splat_radius
 
     rng = np.random.default_rng(0)
     n = 6000
@@ -479,7 +480,7 @@ def test_views_close_the_near_surface():
     far = np.c_[rng.uniform(-1, 1, (n, 2)), np.full(n, -0.5)]
     P = np.r_[near, far]
     colours = np.r_[np.tile([[255, 0, 0]], (n, 1)), np.tile([[0, 0, 255]], (n, 1))].astype(np.uint8)
-    spacing, normals = _surface(P)
+    spacing, normals = local_surface(P)
     assert np.allclose(np.abs(normals[:, 2]), 1.0, atol=1e-6)
     size, half = 200, 1.2
     radius = splat_radius(spacing, half, size)
@@ -517,14 +518,20 @@ def test_report_numbers_drop_rounding_noise():
     assert _fmt_num(float("nan"), scale=1.0) == "nan"
 
 
-def test_report_draws_points_as_wide_as_their_spacing():
+def test_report_draws_points_as_wide_as_their_spacing_and_shaded():
     from houghcad.htmlreport import _payload
-    from houghcad.render import sample_spacing
+    from houghcad.render import local_surface
 
     rng = np.random.default_rng(1)
     P = np.c_[rng.uniform(0, 10, (4000, 2)), np.zeros(4000)]
     # The 6th neighbour of a random sample of density 40 per unit area: about sqrt(6 / (pi 40)).
-    assert 0.8 * np.sqrt(6 / (np.pi * 40)) < sample_spacing(P) < 1.2 * np.sqrt(6 / (np.pi * 40))
-    assert sample_spacing(P[:5]) == 0.0
+    spacing, normals = local_surface(P)
+    assert 0.8 * np.sqrt(6 / (np.pi * 40)) < spacing < 1.2 * np.sqrt(6 / (np.pi * 40))
+    assert np.allclose(np.abs(normals[:, 2]), 1.0)
+    assert local_surface(P[:2])[0] == 0.0
     pts, res = _hand_result()
-    assert _payload(pts, res, 100_000, np.zeros((len(res.segments), 3), np.uint8))["spacing"] == sample_spacing(pts)
+    data = _payload(pts, res, 100_000, np.zeros((len(res.segments), 3), np.uint8))
+    assert data["spacing"] > 0
+    nrm = np.frombuffer(base64.b64decode(data["normals"]), dtype=np.int8).reshape(3, -1).T
+    assert nrm.shape == (data["n_drawn"], 3)
+    assert np.all(np.abs(np.linalg.norm(nrm / 127.0, axis=1) - 1.0) < 0.02)

@@ -39,7 +39,7 @@ import numpy as np
 
 from .palette import (UNSEGMENTED_COLOR, group_color, hex_color, segment_colors, segment_edges, type_color,
                       types_present)
-from .render import draw_sample, sample_spacing
+from .render import _LIGHT, draw_sample, local_surface
 from .report import group_sentence
 from .result import GROUP_KINDS, Result
 
@@ -125,6 +125,7 @@ def _payload(points: np.ndarray, result: Result, max_points: int, seg_rgb: np.nd
     # float32 offsets from the centre keep ~7 significant digits of the extent even
     # when the coordinates carry a large common offset.
     planar = np.ascontiguousarray((P - centre).T, dtype="<f4")
+    spacing, normals = local_surface(P - centre)
     colour_group, member_of = _segment_groups(result)
     traces = []
     for s in result.segments:
@@ -147,7 +148,12 @@ def _payload(points: np.ndarray, result: Result, max_points: int, seg_rgb: np.nd
         "radius": float(max(np.linalg.norm(hi - lo) / 2.0, 1e-12)),
         # A drawn point's width in the cloud's units: neighbouring points then meet, and the
         # near side of the part hides the far one (at a fixed 3 pixels it showed through).
-        "spacing": sample_spacing(P),
+        "spacing": spacing,
+        # Unoriented normals, int8 per component (planar, as xyz): the view shades each point
+        # by its surface's turn from the light, so faces at different angles read apart.
+        "normals": base64.b64encode(np.ascontiguousarray(
+            np.rint(normals.T * 127.0), dtype=np.int8).tobytes()).decode("ascii"),
+        "light": [float(c) for c in _LIGHT],
     }
 
 

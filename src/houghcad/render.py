@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-__all__ = ["render_png", "draw_sample", "principal_frame", "sample_spacing", "splat", "splat_radius", "shaded",
+__all__ = ["render_png", "draw_sample", "principal_frame", "local_surface", "splat", "splat_radius", "shaded",
            "MAX_DRAWN_POINTS"]
 
 #: Points drawn per view at most; more only slow drawing without a visible change.
@@ -143,7 +143,7 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
     sel = draw_sample(len(pts), max_points)
     P = principal_frame(pts[sel])
     colours = {by: point_colors(result, by, pts)[sel] for by in ("type", "segment")}
-    spacing, normals = _surface(P)
+    spacing, normals = local_surface(P)
     lo, hi = P.min(axis=0), P.max(axis=0)
     centre = (lo + hi) / 2.0
     # Half the side of a view, with a margin: the largest half-extent for the
@@ -173,7 +173,7 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
         fig.savefig(f, format="png", dpi=dpi)
 
 
-def _surface(P: np.ndarray, k: int = 10) -> tuple[float, np.ndarray]:
+def local_surface(P: np.ndarray, k: int = 10) -> tuple[float, np.ndarray]:
     """The median distance from a point of ``P`` (N, 3) to its 6th neighbour, and the points'
     unoriented PCA normals over ``k`` neighbours, shape (N, 3): what the views need to close
     the surface between points and to shade it. (The 6th, not the nearest: random samples
@@ -189,24 +189,9 @@ def _surface(P: np.ndarray, k: int = 10) -> tuple[float, np.ndarray]:
     return float(np.median(dist[:, min(6, k - 1)])), pca_normals(P, np.ascontiguousarray(nbr, dtype=np.int64))[0]
 
 
-def sample_spacing(P: np.ndarray, probes: int = 5000) -> float:
-    """Median distance from a point of ``P`` (N, 3) to its 6th neighbour among all of them, read
-    at up to ``probes`` seeded points (exact for those: the tree holds every point), 0 for fewer
-    than 7 points. Random samples leave gaps about twice their nearest-neighbour distance, so a
-    drawn point as wide as this closes the surface."""
-    from scipy.spatial import cKDTree
-
-    from .normals import tree_query
-
-    if len(P) < 7:
-        return 0.0
-    at = P[draw_sample(len(P), probes)]
-    return float(np.median(tree_query(cKDTree(P), at, k=7)[0][:, 6]))
-
-
 def splat_radius(spacing: float, half: float, size: int) -> int:
     """Pixels each side of a drawn point so that neighbouring points' squares meet, ``spacing``
-    the distance to a point's 6th neighbour (:func:`_surface`) in a view ``2 half`` wide and
+    the distance to a point's 6th neighbour (:func:`local_surface`) in a view ``2 half`` wide and
     ``size`` pixels: a surface then reads as closed and hides what lies behind it (1 pixel let
     the far side show through the gaps between the near side's points). At most 8: a sparse
     cloud stays a cloud of points."""
@@ -216,7 +201,7 @@ def splat_radius(spacing: float, half: float, size: int) -> int:
 
 #: Direction of the light in a view's basis (right, up, towards the viewer): from the viewer's
 #: upper left, so that faces at different angles get different brightness.
-_LIGHT = np.array([-0.35, 0.5, 1.0]) / np.linalg.norm([-0.35, 0.5, 1.0])
+_LIGHT = np.array([-0.25, 0.35, 1.0]) / np.linalg.norm([-0.25, 0.35, 1.0])
 
 
 def shaded(colors: np.ndarray, normals: np.ndarray, ambient: float = 0.55) -> np.ndarray:

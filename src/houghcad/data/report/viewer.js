@@ -4,6 +4,8 @@
   var raw = atob(D.xyz), bytes = new Uint8Array(raw.length);
   for (var i = 0; i < raw.length; i++) bytes[i] = raw.charCodeAt(i);
   var xyz = new Float32Array(bytes.buffer), n = D.n_drawn;  // little-endian, as every browser platform
+  var rawN = atob(D.normals), nrm = new Int8Array(rawN.length);  // planar int8 normals, 127 = 1
+  for (var i = 0; i < rawN.length; i++) nrm[i] = rawN.charCodeAt(i);
   var start = 0;
   D.traces.forEach(function (t) { t.start = start; start += t.drawn; t.visible = true; });
   var mode = "segment";
@@ -22,14 +24,19 @@
   var prog = gl.createProgram();
   gl.attachShader(prog, shader(gl.VERTEX_SHADER,
     "attribute float ax; attribute float ay; attribute float az; uniform mat4 mvp; uniform float size;" +
-    "uniform float wsize;" +
+    "attribute float bx; attribute float by; attribute float bz; uniform mat3 rot; uniform vec3 light;" +
+    "uniform float wsize; varying float shade;" +
     // A point is as wide as the points' spacing at its depth (wsize / w pixels), at least
-    // `size` pixels: the surface closes and hides what lies behind it at any zoom.
+    // `size` pixels: the surface closes and hides what lies behind it at any zoom. It is shaded
+    // by its unoriented normal against a light from the viewer's upper left, never below 55 %.
     "void main() { gl_Position = mvp * vec4(ax, ay, az, 1.0);" +
-    " gl_PointSize = max(size, wsize / gl_Position.w); }"));
+    " gl_PointSize = max(size, wsize / gl_Position.w);" +
+    " vec3 m = rot * vec3(bx, by, bz); float l = length(m);" +
+    " shade = l > 0.0 ? 0.55 + 0.45 * abs(dot(m / l, light)) : 1.0; }"));
   gl.attachShader(prog, shader(gl.FRAGMENT_SHADER,
-    "precision mediump float; uniform vec3 color;" +
-    "void main() { vec2 d = gl_PointCoord - 0.5; if (dot(d, d) > 0.25) discard; gl_FragColor = vec4(color, 1.0); }"));
+    "precision mediump float; uniform vec3 color; varying float shade;" +
+    "void main() { vec2 d = gl_PointCoord - 0.5; if (dot(d, d) > 0.25) discard;" +
+    " gl_FragColor = vec4(color * shade, 1.0); }"));
   gl.linkProgram(prog);
   gl.useProgram(prog);
   var buf = gl.createBuffer();
@@ -40,6 +47,16 @@
     gl.enableVertexAttribArray(loc);
     gl.vertexAttribPointer(loc, 1, gl.FLOAT, false, 0, a * n * 4);
   });
+  var nbuf = gl.createBuffer();
+  gl.bindBuffer(gl.ARRAY_BUFFER, nbuf);
+  gl.bufferData(gl.ARRAY_BUFFER, nrm, gl.STATIC_DRAW);
+  ["bx", "by", "bz"].forEach(function (name, a) {
+    var loc = gl.getAttribLocation(prog, name);
+    gl.enableVertexAttribArray(loc);
+    gl.vertexAttribPointer(loc, 1, gl.BYTE, true, 0, a * n);
+  });
+  var uRot = gl.getUniformLocation(prog, "rot"), uLight = gl.getUniformLocation(prog, "light");
+  gl.uniform3fv(uLight, D.light);
   var uMvp = gl.getUniformLocation(prog, "mvp"), uSize = gl.getUniformLocation(prog, "size"),
       uWsize = gl.getUniformLocation(prog, "wsize"),
       uColor = gl.getUniformLocation(prog, "color");
@@ -114,6 +131,9 @@
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
     mvp = mvpMatrix();
     gl.uniformMatrix4fv(uMvp, false, mvp);
+    var c = frame();  // the view's rotation: rows right, up, towards the viewer (column-major)
+    gl.uniformMatrix3fv(uRot, false, new Float32Array([c.r[0], c.u[0], -c.f[0], c.r[1], c.u[1], -c.f[1],
+                                                        c.r[2], c.u[2], -c.f[2]]));
     gl.uniform1f(uSize, 1.5 * dpr);
     // Pixels of one world unit at clip depth w = 1: the projection's y scale times half the height.
     gl.uniform1f(uWsize, pointSize * (D.spacing || 0) * scales()[1] * canvas.height / 2);
