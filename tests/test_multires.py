@@ -211,3 +211,19 @@ def test_two_million_points():
     assert sorted(s.type for s in result.segments) == sorted(p["type"] for p in cloud.primitives)
     assert _dsc(result, cloud) >= _dsc(reference, small) - 0.01
     assert len(result.unsegmented) <= 0.005 * len(cloud.points)
+
+
+def test_a_trace_of_a_subsampled_run_shows_the_subsample_with_its_input_rows(tmp_path):
+    """The passes run on the subsample: the trace's PLYs hold its points, each with its input
+    row (the CLI's --trace raised on them after the whole run, and no result was written)."""
+    from plyfile import PlyData
+
+    pts = synth.PARTS["filleted_block"](seed=0, n_points=5000).points
+    seg = Segmenter(max_points=2000, trace=tmp_path / "trace").fit(pts)
+    files = sorted((tmp_path / "trace").glob("*.ply"))
+    assert files and files[0].name == "01_recognition.ply"
+    v = PlyData.read(str(files[-1]))["vertex"].data
+    rows = np.asarray(v["input_index"])
+    assert 1000 < len(rows) <= 2000 and len(np.unique(rows)) == len(rows) and rows.max() < len(pts)
+    np.testing.assert_allclose(np.c_[v["x"], v["y"], v["z"]], pts[rows], rtol=1e-12)
+    assert seg.result_.n_points == len(pts)

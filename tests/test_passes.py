@@ -104,3 +104,7 @@ def test_skipped_passes_do_not_run_and_unknown_ones_are_refused(noisy_part):
     assert "consolidation" in steps and "consolidation.absorb" not in steps
     with pytest.raises(houghcad.InputError, match="unknown pass 'filets'"):
         houghcad.segment(noisy_part.points, skip=("filets",))
+    # One pass's name alone is that pass, in the run and in the result's record.
+    steps.clear()
+    res = houghcad.segment(noisy_part.points, skip="fillets", trace=lambda step, name, seg: steps.append(name))
+    assert "fillets" not in steps and res.options["skip"] == ["fillets"]

@@ -415,6 +415,17 @@ def test_result_round_trip_through_json(part_runs):
     np.testing.assert_array_equal(back.labels(), res.labels())
     assert json.loads(res.to_json()) == res.to_dict()
     assert json.dumps(back.to_dict()) == text
+    # Results, segments, parts and groups compare by value (the generated == raised on arrays).
+    assert back == res and back.segments == res.segments and back.groups == res.groups
+    assert [p for s in back.segments for p in s.parts] == [p for s in res.segments for p in s.parts]
+    other = Result.from_dict(json.loads(text))
+    other.segments[0].indices = other.segments[0].indices[1:]
+    assert other != res and other.segments[0] != res.segments[0]
+    # Another format, or a newer version than this houghcad writes, is refused.
+    with pytest.raises(ValueError, match="not a houghcad result"):
+        Result.from_dict({**json.loads(text), "format": "not-houghcad"})
+    with pytest.raises(ValueError, match="version 99"):
+        Result.from_dict({**json.loads(text), "version": 99})
 
 
 # ---------------------------------------------------------------------------- refinement
@@ -545,3 +556,25 @@ def test_the_same_result_for_every_n_jobs(monkeypatch):
 def test_bad_n_jobs_raise_input_error(small_part, n_jobs):
     with pytest.raises(InputError, match="n_jobs"):
         houghcad.Segmenter(n_jobs=n_jobs).fit(small_part.points)
+
+
+def test_coarse_float32_coordinates_warn():
+    """A part far from the origin stored as float32 (a georeferenced scan's PLY) snaps to a grid
+    coarser than its spacing: the run says so; float64 at the same place, or float32 near the
+    origin, does not."""
+    import warnings
+
+    from houghcad.errors import InputWarning
+    from houghcad.pipeline import float32_resolution
+
+    P = synth.block_with_hole_and_slot(seed=0, n_points=3000).points
+    far = P + [3e6, 3e6, 0.0]
+    assert float32_resolution(far) == 0.0  # float64 values
+    f32 = far.astype(np.float32).astype(np.float64)
+    assert float32_resolution(f32) == 0.25  # float32's step between 2**21 and 2**22
+    with pytest.warns(InputWarning, match="float32 values rounded to 0.25 units"):
+        houghcad.segment(f32, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InputWarning)
+        houghcad.segment(far, seed=0)
+        houghcad.segment(P.astype(np.float32).astype(np.float64), seed=0)

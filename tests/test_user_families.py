@@ -258,6 +258,8 @@ def test_user_family_is_selectable_by_name_and_unknown_names_still_error(familie
     ({"bounds": {"q": (0, 1)}}, "unknown parameters"),
     ({"x": sp.cos(k * u), "y": sp.sin(k * u), "z": sp.exp(h * v)}, "linearly"),
     ({"search": "global"}, "search must be one of"),
+    ({"valid": 3}, "valid must be a function"),
+    ({"precedence": "high"}, "precedence must be a whole number"),
 ])
 def test_bad_definitions_give_clear_errors(families, kwargs, message):
     spec = dict(name="bad_family", x=u * sp.cos(v), y=u * sp.sin(v), z=k * u**2 + h, params=[k, h], u_range=None,

@@ -516,6 +516,9 @@ def test_report_numbers_drop_rounding_noise():
     assert _fmt_num(0.0123, scale=150.0) == "0.0123"
     assert _fmt_num([1e-3, 0.0, 1.0]) == "(0.001, 0, 1)"
     assert _fmt_num(float("nan"), scale=1.0) == "nan"
+    # Georeferenced coordinates keep the digits that place a feature on the part.
+    assert _fmt_num([500009.41, 3999966.67, 99.963], scale=20.0) == "(500009.41, 3999966.67, 99.963)"
+    assert _fmt_num(0.70710678, scale=150.0) == "0.70711"
 
 
 def test_report_draws_points_as_wide_as_their_spacing_and_shaded():

@@ -59,14 +59,15 @@ _CSP = ("default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inlin
 ROUNDING_SHARE = 1e-9
 
 
-def _fmt_num(x: Any, scale: float = 0.0) -> str:
-    """A parameter value for the tables: 5 significant digits, vectors in parentheses; values
-    within :data:`ROUNDING_SHARE` of ``scale`` (or of a vector's largest component) read 0."""
+def _fmt_num(x: Any, scale: float = 0.0, zero: float | None = None) -> str:
+    """A parameter value for the tables, vectors in parentheses: enough significant digits to
+    show it to 1e-5 of ``scale`` (the part's diagonal), at least 5; values within
+    :data:`ROUNDING_SHARE` of ``scale`` (or of a vector's largest component) read 0."""
+    zero = ROUNDING_SHARE * scale if zero is None else zero
     if isinstance(x, (list, tuple, np.ndarray)):
-        flat = [float(v) for v in x if isinstance(v, (int, float, np.integer, np.floating))
+        flat = [abs(float(v)) for v in x if isinstance(v, (int, float, np.integer, np.floating))
                 and not isinstance(v, (bool, np.bool_)) and math.isfinite(v)]
-        big = max([scale] + [abs(v) for v in flat])
-        return "(" + ", ".join(_fmt_num(v, big) for v in x) + ")"
+        return "(" + ", ".join(_fmt_num(v, scale, max([zero] + [ROUNDING_SHARE * v for v in flat])) for v in x) + ")"
     if isinstance(x, (bool, np.bool_)):
         return str(bool(x))
     if isinstance(x, (int, np.integer)):
@@ -74,10 +75,20 @@ def _fmt_num(x: Any, scale: float = 0.0) -> str:
     if isinstance(x, (float, np.floating)):
         if not math.isfinite(x):
             return str(float(x))
-        return "0" if abs(float(x)) <= ROUNDING_SHARE * scale else f"{float(x):.5g}"
+        if abs(float(x)) <= zero:
+            return "0"
+        return f"{float(x):.{_digits(float(x), scale)}g}"
     if isinstance(x, dict):
         return "{" + ", ".join(f"{k} {_fmt_num(v, scale)}" for k, v in x.items()) + "}"
     return str(x)
+
+
+def _digits(x: float, scale: float) -> int:
+    """Significant digits that show ``x`` to 1e-5 of ``scale`` (the part's diagonal), at least 5:
+    a georeferenced axis point at y = 3999966.67 read 4e+06 at 5 digits, 33 units off."""
+    if scale <= 0 or x == 0:
+        return 5
+    return int(min(15, max(5, math.ceil(math.log10(abs(x) / (1e-5 * scale))))))
 
 
 def _fmt_params(params: dict[str, Any], scale: float = 0.0) -> str:

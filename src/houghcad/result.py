@@ -89,6 +89,12 @@ class Segment:
             d["parts"] = [p.to_dict() for p in self.parts]
         return d
 
+    def __eq__(self, other: object) -> bool:
+        """Same fields, arrays compared by value (the generated ``==`` raised on them)."""
+        return _same(self.to_dict(), other.to_dict()) if isinstance(other, Segment) else NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Segment":
         return cls(
@@ -132,6 +138,12 @@ class Part:
                 "params": _jsonable(self.params), "indices": [int(i) for i in self.indices],
                 "edge_indices": [int(i) for i in self.edges]}
 
+    def __eq__(self, other: object) -> bool:
+        """Same fields, arrays compared by value (the generated ``==`` raised on them)."""
+        return _same(self.to_dict(), other.to_dict()) if isinstance(other, Part) else NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Part":
         return cls(indices=_indices(d["indices"]), params=dict(d.get("params", {})),
@@ -169,6 +181,12 @@ class Group:
     def to_dict(self) -> dict[str, Any]:
         return {"kind": self.kind, "members": [int(m) for m in self.members],
                 "descriptors": _jsonable(self.descriptors)}
+
+    def __eq__(self, other: object) -> bool:
+        """Same fields, arrays compared by value (the generated ``==`` raised on them)."""
+        return _same(self.to_dict(), other.to_dict()) if isinstance(other, Group) else NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Group":
@@ -257,8 +275,27 @@ class Result:
             "groups": [g.to_dict() for g in self.groups],
         }
 
+    def __eq__(self, other: object) -> bool:
+        """Same points, segments (indices, parameters, errors, parts), groups and options, timing
+        aside: a result equals its JSON round trip, and a rerun's. (The generated ``==``
+        compared numpy arrays and raised.)"""
+        if not isinstance(other, Result):
+            return NotImplemented
+        a, b = self.to_dict(), other.to_dict()
+        a.pop("timing"), b.pop("timing")
+        return _same(a, b)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable, as any dataclass with eq
+
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Result":
+        """The result of :meth:`to_dict`'s dict ``d``; ValueError for another format or a newer
+        version than this houghcad writes (:data:`RESULT_VERSION`)."""
+        if d.get("format", "houghcad-result") != "houghcad-result":
+            raise ValueError(f"not a houghcad result (format {d.get('format')!r})")
+        version = d.get("version", RESULT_VERSION)
+        if isinstance(version, bool) or not isinstance(version, int) or version > RESULT_VERSION:
+            raise ValueError(f"result format version {version!r}; this houghcad reads up to {RESULT_VERSION}")
         return cls(
             n_points=int(d["n_points"]),
             segments=[Segment.from_dict(s) for s in d["segments"]],
@@ -293,6 +330,11 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, Family) or (isinstance(x, type) and issubclass(x, Family)):
         return x.name  # Segmenter(families=[obj]) records the family by name
     return x
+
+
+def _same(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    """Whether two ``to_dict`` dicts hold the same values (NaN equal to NaN, as in the JSON)."""
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
 
 
 def _indices(values: Any) -> np.ndarray:

@@ -302,10 +302,13 @@ def write_result_ply(path: str | os.PathLike[str], points: np.ndarray, result: A
     write_points_ply(path, pts, fields={**theirs, **ours}, colors=point_colors(result, "segment", pts))
 
 
-def write_trace_ply(path: str | os.PathLike[str], points: np.ndarray, seg: Any, pass_name: str) -> None:
+def write_trace_ply(path: str | os.PathLike[str], points: np.ndarray, seg: Any, pass_name: str,
+                    rows: np.ndarray | None = None) -> None:
     """Write the labels of a segmentation state after one pass, atomically.
 
-    ``points`` (N, 3) are the input's (world coordinates); ``seg`` a
+    ``points`` (N, 3) are those the passes ran on (world coordinates): the
+    input's, or its subsample or distinct points, whose input rows ``rows``
+    (N,) then go in an ``input_index`` field; ``seg`` a
     :class:`houghcad.state.Segmentation`. The ``vertex`` element has
     ``x y z``, ``segment`` (-1 free) and ``type`` (family code, -1 free)
     and colours by type; the header comment names the pass.
@@ -316,7 +319,10 @@ def write_trace_ply(path: str | os.PathLike[str], points: np.ndarray, seg: Any, 
     names = [r.family.name for r in seg.records]
     codes = np.array([type_code(t) for t in names] + [UNSEGMENTED_CODE], dtype=np.int32)
     colors = np.array([type_color(t) for t in names] + [UNSEGMENTED_COLOR], dtype=np.uint8)
-    write_points_ply(path, points, fields={"segment": lab, "type": codes[lab]}, colors=colors[lab],
+    fields = {"segment": lab, "type": codes[lab]}
+    if rows is not None:
+        fields["input_index"] = np.asarray(rows, dtype=np.int64)
+    write_points_ply(path, points, fields=fields, colors=colors[lab],
                      comments=[f"houghcad pass {pass_name}", f"segments {len(names)}"])
 
 

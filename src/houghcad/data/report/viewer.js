@@ -207,8 +207,11 @@
     var out = document.getElementById("pick");
     if (!best) { out.textContent = ""; return; }
     var t = best[0], k = best[1], c = D.centre;
+    // Decimals to 1e-4 of the part's size, whatever the coordinates' offset (a georeferenced
+    // y of 3999966.7 read 4.00000e+6 at 6 significant digits).
+    var dec = Math.max(0, Math.min(10, 4 - Math.floor(Math.log10(D.radius))));
     out.textContent = (t.id < 0 ? "unsegmented" : "segment " + t.id + " (" + t.type + ")") + "\n" +
-      [0, 1, 2].map(function (a) { return "xyz"[a] + " " + (c[a] + xyz[a * n + k]).toPrecision(6); }).join("  ");
+      [0, 1, 2].map(function (a) { return "xyz"[a] + " " + (c[a] + xyz[a * n + k]).toFixed(dec); }).join("  ");
   }
 
   // ---------------------------------------------------------------- controls

@@ -156,6 +156,8 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *, lin
     eq, solved = _compile(name, (x, y, z), names, ur, vr, linear)
     dims, bnds = _length_powers(name, lengths, names), _vote_bounds(name, bounds, names)
     samples = _checked_vote_setup(name, placement, samples, solved)
+    if valid is not None and not callable(valid):
+        raise InputError(f"{name}: valid must be a function of the parameters' values, got {valid!r}")
     fam = ParametricFamily(name, eq, names, dims, ur, vr, solved, bnds, placement, samples, valid)
     _set_search(fam, search, precedence)
     if register:
@@ -283,6 +285,8 @@ def _set_search(fam: ParametricFamily, search: str, precedence: int) -> None:
     """Set the family's search mode (checked) and tie rank."""
     if search not in SEARCHES:
         raise InputError(f"{fam.name}: search must be one of {SEARCHES}, got {search!r}")
+    if isinstance(precedence, bool) or not isinstance(precedence, (int, np.integer)):
+        raise InputError(f"{fam.name}: precedence must be a whole number (lower wins ties), got {precedence!r}")
     fam.search = search
     fam.precedence = int(precedence)
 
