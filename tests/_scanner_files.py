@@ -6,6 +6,7 @@ import contextlib
 import io
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -31,20 +32,26 @@ def las_bytes(pts: np.ndarray, normals: np.ndarray | None = None, intensity: np.
     return buf.getvalue()
 
 
-def pcd_bytes(columns: dict[str, np.ndarray], encoding: str) -> bytes:
-    """A PCD file of float32 ``columns`` (name -> (N,)) in ``encoding`` (ascii, binary, binary_compressed)."""
+def pcd_bytes(columns: dict[str, np.ndarray], encoding: str, types: dict[str, Any] | None = None) -> bytes:
+    """A PCD file of ``columns`` (name -> (N,)) in ``encoding`` (ascii, binary, binary_compressed),
+    each column of the type ``types`` gives it (float32 by default), its values stored as they are."""
     from pypcd4 import Encoding, PointCloud
 
     names = list(columns)
-    pc = PointCloud.from_points(np.column_stack([columns[k] for k in names]), names, [np.float32] * len(names))
+    dtypes = [np.dtype((types or {}).get(k, np.float32)) for k in names]
+    # One array per field (a single table would pass every column through one common type).
+    cols = [np.asarray(columns[k]).astype(t, copy=False) for k, t in zip(names, dtypes)]
+    pc = PointCloud.from_points(cols, names, dtypes)
     with tempfile.TemporaryDirectory() as tmp:  # pypcd4 saves to paths
         path = Path(tmp) / "cloud.pcd"
         pc.save(str(path), encoding=Encoding(encoding))
         return path.read_bytes()
 
 
-def e57_bytes(scans: list[tuple[np.ndarray, np.ndarray]], intensity: bool = True) -> bytes:
-    """An E57 file with one scan per (points (N, 3), translation (3,)); scan k's intensity is k + 0.5."""
+def e57_bytes(scans: list[tuple[np.ndarray, np.ndarray]], intensity: bool = True,
+              invalid: list[np.ndarray | None] | None = None) -> bytes:
+    """An E57 file with one scan per (points (N, 3), translation (3,)); scan k's intensity is k + 0.5.
+    ``invalid[k]``: scan k's ``cartesianInvalidState`` (N,) (0 valid, 1 direction only, 2 no point)."""
     import pye57
 
     with tempfile.TemporaryDirectory() as tmp:  # pye57 writes paths
@@ -54,5 +61,7 @@ def e57_bytes(scans: list[tuple[np.ndarray, np.ndarray]], intensity: bool = True
                 data = {"cartesianX": pts[:, 0], "cartesianY": pts[:, 1], "cartesianZ": pts[:, 2]}
                 if intensity:
                     data["intensity"] = np.full(len(pts), k + 0.5)
+                if invalid is not None and invalid[k] is not None:
+                    data["cartesianInvalidState"] = np.asarray(invalid[k], dtype=np.int8)
                 e57.write_scan_raw(data, name=f"scan {k}", translation=translation)
         return path.read_bytes()

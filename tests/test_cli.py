@@ -476,6 +476,9 @@ def test_segment_real_pipeline(tmp_path, capsys):
     assert "plane" in {s["type"] for s in data["segments"]}
     assert isinstance(data["unsegmented"], list)
     assert isinstance(data["timing"], dict)
+    # The indices are the file's rows, none left out (options.input, docs/schema.md).
+    assert data["options"]["input"] == {"rows": len(pts), "scan": None, "drop_invalid": False, "dropped_rows": [],
+                                        "dropped": {"flagged_invalid": 0, "non_finite": 0}}
 
     prim = (tmp_path / "f4c" / "parts_primitives.txt").read_text()
     # One block per face: a maximal primitive contributes one block per part.
@@ -505,6 +508,16 @@ def test_segment_trace_writes_the_labels_after_every_pass(tmp_path):
     mine = sorted(np.bincount(lab[lab >= 0]).tolist())
     assert mine == sorted(len(s["indices"]) for s in data["segments"])
     np.testing.assert_array_equal(np.flatnonzero(lab < 0), data["unsegmented"])
+
+    # A subsampled run (it raised after the whole run, and wrote no result): the trace holds
+    # the subsample the passes ran on, each point with its input row.
+    sub = tmp_path / "sub"
+    assert main(["segment", str(inp), "-o", str(tmp_path / "sub.json"), "--trace", str(sub),
+                 "--max-points", "1000", "-q"]) == 0
+    v = PlyData.read(str(sorted(sub.iterdir())[-1]))["vertex"].data
+    rows = np.asarray(v["input_index"])
+    assert len(rows) <= 1000 < len(pts) and (tmp_path / "sub.json").is_file()
+    np.testing.assert_allclose(np.c_[v["x"], v["y"], v["z"]], pts[rows], atol=1e-8)  # the file: 9 decimals
 
 
 def test_segment_passes_noise_persistence_min_points_and_tolerances(tmp_path, fake_pipeline):
@@ -843,3 +856,22 @@ def test_a_run_loads_no_library_it_does_not_use():
             "print(' '.join(m for m in ('scipy.optimize', 'matplotlib', 'dask', 'sklearn') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
+
+
+def test_a_coarse_float32_cloud_warns_in_one_line(tmp_path, capsys):
+    """A georeferenced part saved as float32 (a scan's PLY): the run warns, in one line."""
+    from plyfile import PlyData, PlyElement
+
+    from houghcad.synth import block_with_hole_and_slot
+
+    P = block_with_hole_and_slot(seed=0, n_points=1500).points + [3e6, 3e6, 0.0]
+    v = np.empty(len(P), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
+    v["x"], v["y"], v["z"] = P.T
+    inp = tmp_path / "geo.ply"
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(inp))
+    fast = ["--families", "plane", "--jobs", "1"]  # the warning comes before recognition
+    assert main(["segment", str(inp), "-o", str(tmp_path / "geo.json"), *fast]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("houghcad: warning:")]
+    assert len(err) == 1 and "float32 values rounded to 0.25 units" in err[0]
+    assert main(["segment", str(inp), "-o", str(tmp_path / "geo.json"), "-q", *fast]) == 0
+    assert capsys.readouterr() == ("", "")

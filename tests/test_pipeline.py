@@ -572,9 +572,15 @@ def test_coarse_float32_coordinates_warn():
     assert float32_resolution(far) == 0.0  # float64 values
     f32 = far.astype(np.float32).astype(np.float64)
     assert float32_resolution(f32) == 0.25  # float32's step between 2**21 and 2**22
+    fast = {"families": "plane", "n_jobs": 1}  # the warning comes before recognition
     with pytest.warns(InputWarning, match="float32 values rounded to 0.25 units"):
-        houghcad.segment(f32, seed=0)
+        houghcad.segment(f32, seed=0, **fast)
     with warnings.catch_warnings():
         warnings.simplefilter("error", InputWarning)
-        houghcad.segment(far, seed=0)
-        houghcad.segment(P.astype(np.float32).astype(np.float64), seed=0)
+        houghcad.segment(far, seed=0, **fast)
+        houghcad.segment(P.astype(np.float32).astype(np.float64), seed=0, **fast)
+
+
+def test_a_result_without_segments_has_no_groups_per_point():
+    res = Result(10, [], np.arange(10, dtype=np.int64))
+    assert (res.group_labels() == -1).all() and (res.labels() == -1).all()

@@ -161,7 +161,8 @@ def _run_segmentation(cloud: PointCloud, *, quiet: bool = False, merge: bool = T
     """Call :func:`houghcad.pipeline.segment` (imported late: it compiles with numba).
 
     A progress bar goes to stderr unless ``quiet`` or stderr is not a terminal.
-    ``merge`` is passed only to a pipeline that has the association step.
+    ``merge`` is passed only to a pipeline that has the association step. The result's
+    ``options["input"]`` records :meth:`PointCloud.provenance` (the scan read, the rows left out).
     """
     import inspect
 
@@ -170,7 +171,11 @@ def _run_segmentation(cloud: PointCloud, *, quiet: bool = False, merge: bool = T
     if "merge" in inspect.signature(segment).parameters:
         options["merge"] = merge
     with _progress_bar(quiet) as progress:
-        return segment(cloud.points, cloud.normals, source=cloud.source, progress=progress, **options)
+        result = segment(cloud.points, cloud.normals, source=cloud.source, progress=progress, **options)
+    # Which rows of the file the indices refer to (the scan read, the rows left out): the
+    # options are stored as they are, so the JSON layout (RESULT_VERSION) does not change.
+    result.options["input"] = cloud.provenance()
+    return result
 
 
 @contextlib.contextmanager
@@ -227,22 +232,29 @@ def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | N
     return written
 
 
-def _trace_writer(directory: Path, points: Any, inp: Path) -> Callable[[int, str, Any], None]:
-    """A ``trace(step, pass_name, state)`` callback writing ``directory/NN_PASS.ply``
-    (the directory is created now, before the run); the input ``inp`` is never one of them."""
-    from .io.writers import write_trace_ply
-
+def _trace_dir(directory: Path, inp: Path) -> str:
+    """The ``--trace`` folder, created now (before the run): the pipeline writes
+    ``directory/NN_PASS.ply`` after each pass, over the points the passes run on (the
+    subsample of a big cloud, with each point's input row); the input ``inp`` is never one."""
     if directory.exists() and not directory.is_dir():
         raise InputError(f"{directory}: --trace needs a directory")
     if re.fullmatch(r"\d{2}_\w+(\.\w+)*\.ply", inp.name) and _same_file(inp, directory / inp.name):
         raise InputError(f"{inp}: refusing to overwrite the input file with a --trace file (give another folder)")
     _make_dir(directory)
+    return str(directory)
 
-    def trace(step: int, name: str, state: Any) -> None:
-        path = directory / f"{step:02d}_{name}.ply"
-        _write(path, lambda p, s: write_trace_ply(p, points, s, name), state)
 
-    return trace
+def _report_dropped(cloud: PointCloud, inp: Path, quiet: bool) -> None:
+    """Say on stderr how many rows of the file the cloud left out (the result's
+    ``options.input.dropped_rows`` lists them)."""
+    if quiet:
+        return
+    if cloud.flagged:
+        print(f"{PROG}: {inp}: left out {cloud.flagged} points the scanner flagged as invalid (no coordinates)",
+              file=sys.stderr)
+    if cloud.dropped:
+        print(f"{PROG}: {inp}: left out {cloud.dropped} points with a NaN or infinite coordinate",
+              file=sys.stderr)
 
 
 def _print(text: str, quiet: bool) -> None:
@@ -282,7 +294,14 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():  # for this command only: main() also runs inside scripts
         if args.quiet:  # quiet means a silent terminal: the libraries' warnings too
             warnings.simplefilter("ignore")
+        warnings.showwarning = _show_warning
         return _segment(args)
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: Any = None, line: str | None = None) -> None:
+    """A warning as one ``houghcad: warning:`` line on stderr, not Python's file:line form."""
+    print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
 
 def _segment(args: argparse.Namespace) -> int:
@@ -299,9 +318,7 @@ def _segment(args: argparse.Namespace) -> int:
         select(args.families)  # unknown names fail now, not after reading the cloud
     options = segment_options(args)  # a bad --tolerance fails before the cloud is read
     cloud = read_points(inp, **options.read_kwargs())
-    if cloud.dropped and not args.quiet:
-        print(f"{PROG}: {inp}: left out {cloud.dropped} points with a NaN or infinite coordinate",
-              file=sys.stderr)
+    _report_dropped(cloud, inp, args.quiet)
     _check_output(out, [inp])
     if prim is not None:
         truth = truth_beside(inp)
@@ -322,8 +339,13 @@ def _segment(args: argparse.Namespace) -> int:
     kwargs = options.segment_kwargs()
     kwargs["n_jobs"] = args.jobs
     if args.trace:
-        kwargs["trace"] = _trace_writer(Path(args.trace), cloud.points, inp)
-    result = _run_segmentation(cloud, quiet=args.quiet, **kwargs)
+        kwargs["trace"] = _trace_dir(Path(args.trace), inp)
+    try:
+        result = _run_segmentation(cloud, quiet=args.quiet, **kwargs)
+    except OSError as exc:  # the run reads nothing: only the trace's files are written in it
+        if not args.trace:
+            raise
+        raise InputError(f"{args.trace}: cannot write the trace ({exc.strerror or exc})") from None
     _write(out, write_json, result.to_dict())
     written = [out]
     if prim is not None:

@@ -112,10 +112,12 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--full-resolution", action="store_true",
                    help="recognise on every point, however many (slow and memory-hungry on big scans)")
     p.add_argument("--scan", type=non_negative_int, default=None, metavar="K",
-                   help="E57 input: segment scan K only (0-based; default: every scan, merged in the file's frame)")
+                   help="E57 input: segment scan K only (0-based; default: every scan, merged in the file's frame); "
+                   "indices are then the scan's rows (the result's options.input records K)")
     p.add_argument("--drop-invalid", action="store_true",
                    help="leave out points with a NaN or infinite coordinate (scanners mark missing points so) "
-                   "instead of refusing the file, and say how many")
+                   "instead of refusing the file, say how many, and record their rows in the result's "
+                   "options.input.dropped_rows (E57 rows the scanner flags as invalid are left out either way)")
 
 
 @dataclass(frozen=True)

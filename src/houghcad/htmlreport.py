@@ -214,7 +214,12 @@ def _options_line(options: dict[str, Any]) -> str:
     and the derived scales."""
     from .tolerances import Tolerances
 
-    shown = {k: v for k, v in options.items() if k not in ("tolerances", "derived")}
+    shown = {k: v for k, v in options.items() if k not in ("tolerances", "derived", "input")}
+    inp = options.get("input")
+    if isinstance(inp, dict):  # the file's rows, not their ranges (a scan may list thousands)
+        left = sum(int(b) - int(a) for a, b in inp.get("dropped_rows") or [])
+        shown["input"] = f"{inp.get('rows')} rows" + (f" of scan {inp['scan']}" if inp.get("scan") is not None
+                                                      else "") + (f", {left} left out" if left else "")
     if isinstance(options.get("tolerances"), dict):
         try:
             shown["tolerances"] = Tolerances.from_dict(options["tolerances"]).changed() or "defaults"

@@ -255,7 +255,8 @@ class Result:
                 if 0 <= m < len(seg_group) and seg_group[m] < 0:
                     seg_group[m] = g_id
         lab = self.labels()
-        return np.where(lab >= 0, seg_group[np.maximum(lab, 0)], -1)
+        # One entry more for the unsegmented points' -1: a result without segments has them all.
+        return np.append(seg_group, -1)[lab]
 
     def faces(self) -> list[np.ndarray]:
         """Index arrays of every connected piece of every segment (the unit the

@@ -1,15 +1,19 @@
 """What the format readers of :mod:`houghcad.io` share: the reader signature and text helpers.
 
-A reader is ``read(data, source) -> (points, normals)`` or ``(points, normals, fields)``:
-``data`` the file's bytes, ``source`` its name for error messages, ``points`` (N, 3) float64 in
-the file's units, ``normals`` (N, 3) or None, and ``fields`` the file's other per-point
-attributes (intensity, colour ...), name -> (N,) array. Validation (finite, count, degeneracy) happens afterwards in
+A reader is ``read(data, source) -> (points, normals)``, ``(points, normals, fields)`` or
+``(points, normals, fields, rows)``: ``data`` the file's bytes, ``source`` its name for error
+messages, ``points`` (N, 3) float64 in the file's units, ``normals`` (N, 3) or None, ``fields``
+the file's other per-point attributes (intensity, colour ...), name -> (N,) array in the file's
+own type (a PLY output writes them back so), and ``rows`` a :class:`Rows` when the points are not
+simply the file's rows in order (rows the file flags as holding no point, several scans).
+Validation (finite, count, degeneracy) happens afterwards in
 :func:`houghcad.io.readers.validate_points`, so readers only parse.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -17,8 +21,26 @@ import numpy as np
 
 from ..errors import InputError
 
-#: (points (N, 3) float64, normals (N, 3) or None[, fields]) as a reader returns them.
+#: (points (N, 3) float64, normals (N, 3) or None[, fields[, rows]]) as a reader returns them.
 Parsed = tuple
+
+
+@dataclass(frozen=True)
+class Rows:
+    """Where a reader's points come from among the rows of what it read.
+
+    Attributes
+    ----------
+    flagged : ndarray of bool, shape (R,)
+        One per row read (the file's, or the chosen scan's): True where the file itself marks the
+        row as holding no point (E57 ``cartesianInvalidState`` / ``sphericalInvalidState``); the
+        points are the other rows, in order.
+    scans : tuple of int
+        The rows of each scan when several were read, merged in this order (empty otherwise).
+    """
+
+    flagged: np.ndarray
+    scans: tuple[int, ...] = ()
 
 #: ``read(data, source) -> Parsed``.
 Reader = Callable[[bytes, str], Parsed]

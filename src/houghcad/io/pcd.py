@@ -2,7 +2,8 @@
 
 The fields ``x, y, z`` are the points; ``normal_x, normal_y, normal_z`` (or
 ``nx, ny, nz``) the normals when present; the other scalar fields (intensity,
-rgb ...) are kept as the cloud's ``fields``. Organised clouds mark missing
+rgb ...) are kept as the cloud's ``fields``, each in its declared type (a packed ``F 4`` rgb
+stays float32 bit for bit, a ``U 4`` label uint32). Organised clouds mark missing
 points with NaN: such rows are refused unless ``read_points(..., drop_invalid=True)``.
 """
 
@@ -33,20 +34,25 @@ def read_pcd(data: bytes, source: str) -> Parsed:
         with np.errstate(all="ignore"):
             pc = PointCloud.from_fileobj(io.BytesIO(data))
             names = list(pc.fields)
-            table = pc.numpy()
+            # The structured rows, each field in its declared type (U4 label, packed F4 rgb):
+            # pc.numpy() would stack them all into one float64 table.
+            table = np.asarray(pc.pc_data)
     except Exception as exc:  # pypcd4 raises assorted types on malformed files
         raise InputError(f"{source}: cannot parse PCD file ({one_line(exc)})") from None
     if not all(k in names for k in "xyz"):
         raise InputError(f"{source}: PCD file lacks x, y, z fields")
-    table = np.asarray(table)
-    if table.ndim != 2 or table.shape[1] != len(names):
+    if table.ndim != 1 or table.dtype.names is None or not set(names) <= set(table.dtype.names):
         raise InputError(f"{source}: PCD fields with several values each are not supported")
     declared = getattr(getattr(pc, "metadata", None), "points", None)
     if isinstance(declared, int) and len(table) < declared:  # pypcd4 reads what an ascii body holds
         raise InputError(f"{source}: truncated PCD file ({len(table)} of the {declared} points its header declares)")
-    col = {n: table[:, i] for i, n in enumerate(names)}
+    col = {n: np.ascontiguousarray(table[n]) for n in names}
+    if any(v.ndim != 1 for v in col.values()):
+        raise InputError(f"{source}: PCD fields with several values each are not supported")
     points = np.column_stack([col[k] for k in "xyz"]).astype(np.float64)
     normals, names = pick_normals(col)
     used = {"x", "y", "z", *names}
-    fields = {n: v for n, v in col.items() if n not in used and n.isidentifier()}
+    # Each field keeps its own type (a packed float rgb keeps its bits, a uint32 label stays
+    # an integer) for the outputs.
+    fields = {n: v for n, v in col.items() if n not in used and n.isidentifier() and v.dtype.kind in "iufb"}
     return points, normals, fields

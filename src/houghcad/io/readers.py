@@ -38,12 +38,13 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
 from . import e57, las, mesh, npy, pcd, ply, text
-from .common import SNIFF_BYTES, Reader
+from .common import SNIFF_BYTES, Reader, Rows
 
 __all__ = [
     "MIN_POINTS",
@@ -162,10 +163,27 @@ class PointCloud:
     source : str or None
         Path the cloud was read from.
     fields : dict of str to ndarray (N,)
-        The file's other per-point attributes (intensity, colour ...), kept
-        for the outputs.
+        The file's other per-point attributes (intensity, colour ...), each in
+        the file's own type, kept for the outputs.
     dropped : int
         Rows with a NaN or infinite coordinate left out (``drop_invalid``).
+    flagged : int
+        Rows that the file itself flags as holding no point, left out whatever
+        ``drop_invalid`` says (E57 ``cartesianInvalidState``).
+    rows : int or None
+        Rows read: the file's, or with ``scan`` the scan's (with several scans
+        merged, numbered through them in order); None: one per point.
+    scan : int or None
+        The scan read (``read_points(scan=K)``), None for the whole file.
+    drop_invalid : bool
+        Whether rows with a NaN or infinite coordinate were to be left out
+        (``read_points(drop_invalid=True)``) rather than refused.
+    scan_rows : tuple of int
+        The rows of each scan when several were merged, in order (empty otherwise).
+    dropped_rows : ndarray of int64, shape (K, 2)
+        The rows left out (``flagged`` and ``dropped``), as ascending
+        half-open ranges ``[start, stop)``: point ``i`` is the ``i``-th row
+        outside them.
     """
 
     points: np.ndarray
@@ -173,9 +191,31 @@ class PointCloud:
     source: str | None = None
     fields: dict[str, np.ndarray] = field(default_factory=dict)
     dropped: int = 0
+    flagged: int = 0
+    rows: int | None = None
+    scan: int | None = None
+    drop_invalid: bool = False
+    scan_rows: tuple[int, ...] = ()
+    dropped_rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
+
+    def provenance(self) -> dict[str, Any]:
+        """Which rows of the file the points are, as a result's ``options["input"]`` records it
+        (docs/schema.md): ``rows``, ``scan``, ``drop_invalid``, ``dropped_rows`` (half-open ranges),
+        ``dropped`` (``{"flagged_invalid": ..., "non_finite": ...}``) and, with several scans
+        merged, ``scan_rows``."""
+        out: dict[str, Any] = {
+            "rows": int(self.rows if self.rows is not None else len(self) + self.dropped + self.flagged),
+            "scan": self.scan,
+            "drop_invalid": bool(self.drop_invalid),
+            "dropped_rows": [[int(a), int(b)] for a, b in self.dropped_rows],
+            "dropped": {"flagged_invalid": int(self.flagged), "non_finite": int(self.dropped)},
+        }
+        if self.scan_rows:
+            out["scan_rows"] = [int(n) for n in self.scan_rows]
+        return out
 
 
 # --------------------------------------------------------------------------- public API
@@ -199,7 +239,10 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None, *, scan: i
     drop_invalid : bool
         Leave out the rows with a NaN or infinite coordinate (scanners and
         organised PCD clouds mark missing points so) instead of refusing the
-        file; ``PointCloud.dropped`` says how many.
+        file; ``PointCloud.dropped`` says how many. Rows that the file flags as
+        holding no point (E57 invalid state) are left out either way
+        (``PointCloud.flagged``); ``PointCloud.dropped_rows`` lists both, and
+        :meth:`PointCloud.provenance` records them for a result.
 
     Returns
     -------
@@ -227,11 +270,26 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None, *, scan: i
             parsed = _read_parsed(Path(path), source, fmt, scan)
         points, normals = parsed[0], parsed[1]
         fields = dict(parsed[2]) if len(parsed) > 2 else {}
-        dropped = 0
-        if drop_invalid:
-            points, normals, fields, dropped = _drop_invalid(points, normals, fields)
+        rows: Rows | None = parsed[3] if len(parsed) > 3 else None
+        keep = _finite_rows(points) if drop_invalid else None
+        if keep is not None:
+            points, normals, fields = _take(points, normals, fields, keep)
         points, normals = validate_points(points, source, normals, return_normals=True)
-    return PointCloud(points=points, normals=normals, source=source, fields=fields, dropped=dropped)
+    cloud = PointCloud(points=points, normals=normals, source=source, fields=fields, scan=scan,
+                       drop_invalid=bool(drop_invalid))
+    if keep is not None:
+        cloud.dropped = int(len(keep) - np.count_nonzero(keep))
+    cloud.rows = len(cloud) + cloud.dropped
+    if rows is not None:
+        cloud.rows, cloud.scan_rows = len(rows.flagged), tuple(rows.scans)
+        cloud.flagged = int(np.count_nonzero(rows.flagged))
+    if cloud.dropped or cloud.flagged:
+        present = ~rows.flagged if rows is not None else np.ones(len(keep), dtype=bool)
+        if keep is not None:
+            held = np.flatnonzero(present)
+            present[held[~keep]] = False
+        cloud.dropped_rows = row_ranges(~present)
+    return cloud
 
 
 def _read_parsed(path: Path, source: str, fmt: str | None, scan: int | None) -> tuple:
@@ -248,22 +306,31 @@ def _read_parsed(path: Path, source: str, fmt: str | None, scan: int | None) -> 
     return reader.read(data, source, scan=scan) if reader.scans else reader.read(data, source)
 
 
-def _drop_invalid(points: np.ndarray, normals: np.ndarray | None, fields: dict[str, np.ndarray]) \
-        -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray], int]:
-    """The rows whose coordinates are all finite, of the points (N, 3) and of their normals
-    and fields; and how many were left out. Arrays that are not (N, 3) numeric pass as they are
-    (validation reports them)."""
+def _finite_rows(points: np.ndarray) -> np.ndarray | None:
+    """Which rows of the points (N, 3) have every coordinate finite, (N,) bool; None when they
+    all do, or when the array is not (N, 3) numeric (validation reports it)."""
     pts = np.asarray(points)
     if pts.ndim != 2 or pts.shape[1] != 3 or pts.dtype.kind not in "iuf":
-        return points, normals, fields, 0
+        return None
     keep = np.isfinite(pts.astype(np.float64)).all(axis=1)
-    if keep.all():
-        return points, normals, fields, 0
-    n = len(pts)
+    return None if keep.all() else keep
+
+
+def _take(points: np.ndarray, normals: np.ndarray | None, fields: dict[str, np.ndarray], keep: np.ndarray) \
+        -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]]:
+    """The rows ``keep`` (N,) bool of the points (N, 3), of their normals and of their fields
+    (each in its own type)."""
+    n = len(keep)
     nrm = np.asarray(normals)[keep] if normals is not None and np.shape(normals)[:1] == (n,) else normals
     kept = {k: np.asarray(v)[keep] for k, v in fields.items() if np.shape(v)[:1] == (n,)}
-    return pts[keep], nrm, kept, int((~keep).sum())
+    return np.asarray(points)[keep], nrm, kept
 
+
+def row_ranges(mask: np.ndarray) -> np.ndarray:
+    """The runs of True in ``mask`` (R,) bool as ascending half-open ranges ``[start, stop)``,
+    (K, 2) int64: compact for a scan's runs of missing points."""
+    edges = np.diff(np.concatenate(([0], np.asarray(mask, dtype=np.int8), [0])))
+    return np.column_stack([np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)]).astype(np.int64)
 
 
 def detect_format(source: str, data: bytes) -> str:
