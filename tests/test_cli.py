@@ -647,6 +647,11 @@ def test_summary_table_layout():
     assert rows["time"][1] == "0.70"  # the pipeline's own total wins over the sum of stages
     assert list(rows).index("plane") < list(rows).index("cylinder")
     assert len({len(line) for line in lines[:2]}) == 1
+    # A long family name widens the first column: the numbers stay under their headings.
+    res.segments[1].type = "generalized_cylinder"
+    lines = summary_table(res).splitlines()
+    ends = {len(line) for line in lines[:lines.index("-" * len(lines[0]), 2)] if line and line[0] != "-"}
+    assert lines[0].index("segments") > len("generalized_cylinder") and len(ends) == 1, lines
 
 
 # --------------------------------------------------------------------------- pictures, PLY, report, progress (stub pipeline)

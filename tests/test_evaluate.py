@@ -401,3 +401,21 @@ def test_parameter_errors_are_zero_on_the_truth_and_measure_a_tilt():
     assert set(err) <= set(PARAMETER_TOLERANCES)
     with pytest.raises(ValueError):
         parameter_errors("helical_surface", {}, {}, 1.0, pts)
+
+
+def test_a_result_of_another_cloud_is_scored_with_a_warning(tmp_path: Path):
+    """Two clouds of one point count: the result names its cloud, and the scoring says so."""
+    import warnings
+
+    from houghcad.errors import InputWarning
+
+    (tmp_path / "PC7_primitives.txt").write_text("Primitive1:=[1 2 3];\n")
+    rj = _result_json(tmp_path, [_arr(0, 1, 2)], 3)
+    data = json.loads(rj.read_text())
+    rj.write_text(json.dumps({**data, "source": "/data/PC9.txt"}))
+    with pytest.warns(InputWarning, match="the result is of PC9.txt, the ground truth of PC7"):
+        assert evaluate_files(rj, tmp_path / "PC7_primitives.txt")["measures"]["DSC"] == 1.0
+    rj.write_text(json.dumps({**data, "source": "/elsewhere/PC7.txt"}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InputWarning)
+        evaluate_files(rj, tmp_path / "PC7_primitives.txt")

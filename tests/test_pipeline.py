@@ -292,7 +292,8 @@ def test_unusable_normals_given_to_the_api_are_estimated_instead(small_part):
     P = small_part.points
     own = houghcad.segment(P, seed=0)
     for bad in (np.zeros_like(P), np.vstack([np.zeros((1, 3)), np.tile([0.0, 0.0, 1.0], (len(P) - 1, 1))])):
-        r = houghcad.segment(P, bad, seed=0)
+        with pytest.warns(houghcad.errors.InputWarning, match="zero-length normal at row 1"):
+            r = houghcad.segment(P, bad, seed=0)
         assert r.options["normals_used"] == own.options["normals_used"] != "input"
         assert [s.type for s in r.segments] == [s.type for s in own.segments]
 
@@ -565,7 +566,7 @@ def test_coarse_float32_coordinates_warn():
     import warnings
 
     from houghcad.errors import InputWarning
-    from houghcad.pipeline import float32_resolution
+    from houghcad.preprocess import float32_resolution
 
     P = synth.block_with_hole_and_slot(seed=0, n_points=3000).points
     far = P + [3e6, 3e6, 0.0]
@@ -584,3 +585,41 @@ def test_coarse_float32_coordinates_warn():
 def test_a_result_without_segments_has_no_groups_per_point():
     res = Result(10, [], np.arange(10, dtype=np.int64))
     assert (res.group_labels() == -1).all() and (res.labels() == -1).all()
+
+
+def test_unusable_normals_are_named_not_dropped_silently():
+    """3,995 normals for 4,000 points, or one zero row: the run says why it estimates its own,
+    and with normals_method='input' refuses."""
+    from houghcad.errors import InputWarning
+
+    P = synth.block_with_hole_and_slot(seed=0, n_points=1500).points
+    N = np.tile([0.0, 0.0, 1.0], (len(P), 1))
+    fast = {"families": "plane", "n_jobs": 1}
+    with pytest.warns(InputWarning, match=r"not used \(shape \(1495, 3\) for 1500 points\)"):
+        res = houghcad.segment(P, N[:-5], **fast)
+    assert res.options["normals_used"] != "input"
+    N[6] = 0.0
+    with pytest.warns(InputWarning, match="zero-length normal at row 7"):
+        houghcad.segment(P, N, **fast)
+    with pytest.warns(InputWarning), pytest.raises(houghcad.InputError, match="'input' needs usable normals"):
+        houghcad.segment(P, N, normals_method="input", **fast)
+
+
+def test_segmenter_has_scikit_learns_estimator_api():
+    sklearn_base = pytest.importorskip("sklearn.base")
+    seg = houghcad.Segmenter(families="plane", seed=3)
+    assert repr(seg) == "Segmenter(families='plane', seed=3)"
+    assert seg.get_params()["seed"] == 3 and set(seg.get_params()) >= {"families", "epsilon", "n_jobs"}
+    copy = sklearn_base.clone(seg)
+    assert copy is not seg and copy.get_params() == seg.get_params()
+    assert seg.set_params(seed=5, min_points=10) is seg and (seg.seed, seg.min_points) == (5, 10)
+    with pytest.raises(InputError, match="no parameter 'sed'"):
+        seg.set_params(sed=1)
+
+
+def test_reassociate_leaves_the_fit_as_it_was_and_records_its_options(small_part):
+    seg = houghcad.Segmenter(seed=0).fit(small_part.points)
+    before_state, before = seg.segmentation_, seg.result_
+    other = seg.reassociate(merge=False, association={"angle_tol": 5.0})
+    assert seg.segmentation_ is before_state and seg.result_ is before
+    assert other.options["merge"] is False and other.options["association"] == {"angle_tol": 5.0}

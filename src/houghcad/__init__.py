@@ -37,4 +37,13 @@ def __getattr__(name: str):
         from .io import read_points
 
         return read_points
-    raise AttributeError(name)
+    if name in _SUBMODULES:  # ``import houghcad; houghcad.evaluate.…`` as the README writes it
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+#: Submodules reachable as attributes of the package after a plain ``import houghcad``.
+_SUBMODULES = ("evaluate", "synth", "io", "families", "pipeline", "render", "htmlreport", "report", "result",
+               "tolerances", "palette", "errors")

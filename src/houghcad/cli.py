@@ -294,7 +294,6 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():  # for this command only: main() also runs inside scripts
         if args.quiet:  # quiet means a silent terminal: the libraries' warnings too
             warnings.simplefilter("ignore")
-        warnings.showwarning = _show_warning
         return _segment(args)
 
 
@@ -429,7 +428,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         except SystemExit as exc:  # --help / --version print, then "exit"
             return exc.code if isinstance(exc.code, int) else 0
-        return args.func(args)
+        with warnings.catch_warnings():  # for this command only: main() also runs inside scripts
+            warnings.showwarning = _show_warning
+            return args.func(args)
     except InputError as exc:
         _error(str(exc))
         return 2

@@ -29,7 +29,7 @@ def _number_in(text: str, hi: float, what: str) -> float:
 
 
 def _fraction(text: str) -> float:
-    """``--epsilon``: a fraction of the bounding-box diagonal, 0 < F < 0.5 (as Segmenter)."""
+    """``--epsilon``: a fraction of the part's bounding-box diagonal in its own frame, 0 < F < 0.5 (as Segmenter)."""
     return _number_in(text, 0.5, "a fraction of the diagonal in (0, 0.5), e.g. 0.01")
 
 
@@ -86,7 +86,8 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
                    help="run a Python file that defines families with houghcad.define_family before segmenting "
                    "(repeatable; it runs unsandboxed: only files you trust); name them in --families")
     p.add_argument("--epsilon", type=_fraction, default=None, metavar="F",
-                   help="distance tolerance as a fraction of the bounding-box diagonal, below 0.5 "
+                   help="distance tolerance as a fraction of the diagonal of the part's bounding box in its own frame "
+                        "(its most common face normals as axes: the same in any pose), below 0.5 "
                    "(default: from the point spacing and the estimated noise)")
     p.add_argument("--seed", type=non_negative_int, default=0, metavar="N", help="random seed (default: 0)")
     p.add_argument("--normals", choices=("auto", "pca", "voting"), default="auto",
@@ -105,7 +106,7 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
                         "8 on noisy clouds)")
     p.add_argument("--tolerance", action="append", default=[], metavar="STAGE.NAME=VALUE",
                    help="set a named tolerance (repeatable), e.g. recognition.keep_share=0.5; "
-                   "docs/tolerances.md lists them")
+                   "`python -m houghcad.tolerances` lists them (docs/tolerances.md in the sources)")
     p.add_argument("--max-points", type=subsample_size, default=None, metavar="N",
                    help="clouds with more points are recognised on an even subsample of at most N points, then "
                    "every point is labelled from its subsample neighbours (default: 100000; at least 1000)")

@@ -325,6 +325,21 @@ def _cloud_beside(given: Path, gt_file: Path) -> Path | None:
     return next((p for p in names if p.is_file()), None)
 
 
+def _warn_other_cloud(source: str | None, gt_file: Path, rpath: Path) -> None:
+    """Warn when the result names a cloud other than the ground truth's: two clouds of one point
+    count score each other without complaint otherwise (DSC 0.22 for one Fit4CAD cloud on another)."""
+    if not source:
+        return
+    mine, theirs = Path(source).stem, Path(gt_file).name.removesuffix("_primitives.txt")
+    if mine != theirs:
+        import warnings
+
+        from .errors import InputWarning
+
+        warnings.warn(f"{rpath}: the result is of {Path(source).name}, the ground truth of {theirs}: "
+                      "scored as given", InputWarning, stacklevel=3)
+
+
 def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
                    maximal: bool = False) -> dict[str, Any]:
     """Evaluate a saved :class:`Result` (JSON of ``Result.to_dict()``) against Fit4CAD ground truth.
@@ -374,6 +389,7 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
     gt_file = ground_truth_for(ground_truth_path)
     gt = read_fit4cad_segments(gt_file)
     n = result.n_points
+    _warn_other_cloud(result.source, gt_file, rpath)
     cloud = _cloud_beside(Path(ground_truth_path), gt_file)
     if cloud is not None:
         m = len(read_points(cloud).points)

@@ -12,7 +12,6 @@ timed under its name in ``Result.timing``, and ``Segmenter(trace=...)``
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
@@ -25,7 +24,8 @@ from .blend import find_fillets
 from .boundaries import dissolve_redundant, edge_points, settle_edges, settle_noisy_edges
 from .consolidation import consolidate, revisit_poor_fits
 from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
-from .errors import InputError, InputWarning
+from .errors import InputError
+from .estimator import ParamsMixin
 from .parallel import Workers, resolve_jobs
 from .planes import prefer_planes
 from .growth import absorb, accept
@@ -33,7 +33,7 @@ from .multires import Subsample, copy_to_twins, distinct_points, propagate, voxe
 from .output import build_segments
 from .noise import choose
 from .options import MIN_MAX_POINTS, check_options
-from .preprocess import preprocess
+from .preprocess import preprocess, warn_coarse_float32
 from .recognize import recognize, refine
 from .result import Result
 from .splitting import splitting_phase
@@ -54,33 +54,6 @@ DEFAULT_MAX_POINTS = 100_000
 #: Coordinates beyond this (units) are refused: the fits sum squared distances, which
 #: overflow float64 (about 1.8e308) long before the coordinates themselves do.
 MAX_COORDINATE = 1e100
-#: Float32 rounding of the coordinates, in point spacings, from which a run warns: measured on
-#: a synthetic block offset to georeferenced coordinates, DSC 0.974 exact, 0.964 at 0.56
-#: spacings (the noise estimate reads the scatter), 0.69 at 1 spacing, 0.14 at 2.
-COARSE_FLOAT32_SPACINGS = 0.5
-
-
-def float32_resolution(points: np.ndarray) -> float:
-    """The rounding step (units) of coordinates that went through float32, as a float32 PLY or
-    PCD of a scan stores them: the float32 spacing at the largest magnitude of the coarsest axis
-    when every coordinate of ``points`` (n, 3) is a float32 value, else 0 (float64 data)."""
-    P = np.asarray(points, dtype=np.float64)
-    # Read on at most 100,000 evenly spread rows: float64 data fails at once, a scan's all pass.
-    rows = P[::max(1, len(P) // 100_000)]
-    if not len(P) or not np.array_equal(rows.astype(np.float32).astype(np.float64), rows):
-        return 0.0
-    return float(np.spacing(np.abs(P).max(axis=0).astype(np.float32)).max())
-
-
-def _warn_coarse_float32(points: np.ndarray, spacing: float, source: str | None) -> None:
-    """Warn when float32 rounding of the coordinates is coarse against the point ``spacing``
-    (units): far from the origin (georeferenced scans) float32 keeps too few digits, and the
-    points snap to a grid that no fit can undo."""
-    step = float32_resolution(points)
-    if spacing > 0 and step >= COARSE_FLOAT32_SPACINGS * spacing:
-        warnings.warn(f"{source or 'input'}: the coordinates are float32 values rounded to {step:.3g} units, "
-                      f"{step / spacing:.2g} point spacings, so the surfaces blur; store them as float64 or "
-                      "subtract an offset (e.g. the cloud's centre) before saving", InputWarning, stacklevel=3)
 
 
 def _nearest_edges(ctx: Context) -> bool:
@@ -244,7 +217,7 @@ def pass_names() -> list[str]:
     return [n for p in PIPELINE for n in names(p)]
 
 
-class Segmenter:
+class Segmenter(ParamsMixin):
     """Decompose a point cloud into primitives (scikit-learn style).
 
     Parameters
@@ -252,7 +225,8 @@ class Segmenter:
     families : str or list of str or Family
         ``"simple"`` (plane, cylinder, cone, sphere, torus), ``"all"``, or names.
     epsilon : float, optional
-        Removal threshold ε as a fraction of the bounding-box diagonal
+        Removal threshold ε as a fraction of the diagonal of the part's bounding box in its own frame
+        (its most common face normals as axes: the same in any pose)
         (the paper uses 0.01–0.03). Default: adapted to the point spacing and
         the estimated noise.
     normals_method : {"auto", "pca", "voting", "input"}
@@ -338,6 +312,8 @@ class Segmenter:
         self.n_jobs = n_jobs
 
     def get_options(self) -> dict[str, Any]:
+        """The options a result records (``Result.options``): the constructor's arguments that
+        shape the output, families by name, plain values (JSON)."""
         fams = self.families
         return {"families": fams if isinstance(fams, str) else [getattr(f, "name", f) for f in fams],
                 "epsilon": self.epsilon, "normals_method": self.normals_method,
@@ -377,7 +353,12 @@ class Segmenter:
             raise InputError(f"{source or 'input'}: coordinates up to {top:.3g}; beyond "
                              f"{MAX_COORDINATE:g} the fits' squared distances overflow, so rescale the cloud")
         # Unusable normals (wrong shape, non-finite or zero-length rows) are estimated, as a file's.
-        normals = None if clean_normals(normals, len(points)) is None else np.asarray(normals, dtype=np.float64)
+        if normals is not None and clean_normals(normals, len(points), source) is None:
+            if self.normals_method == "input":  # the warning said why; with "input" it is an error
+                raise InputError(f"{source or 'input'}: normals method 'input' needs usable normals, and these "
+                                 "are not (see the warning)")
+            normals = None
+        normals = None if normals is None else np.asarray(normals, dtype=np.float64)
         check_options(self)
         tol = self._tolerances()
         skip = [self.skip] if isinstance(self.skip, str) else list(self.skip)
@@ -404,7 +385,7 @@ class Segmenter:
         pre = preprocess(work, work_normals, method=self.normals_method, seed=self.seed, noise=self.noise,
                          workers=jobs, sampling_scales=tol.scale.link_scale_max > 1.0)
         ctx = self._context(pre, len(work), tol)
-        _warn_coarse_float32(points, ctx.spacing / pre.transform.scale, source)
+        warn_coarse_float32(points, ctx.spacing / pre.transform.scale, source)
         timing["preprocess"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         with Workers(ctx, fams, jobs) as workers:
@@ -444,7 +425,16 @@ class Segmenter:
         run = replace(run, ctx=replace(run.ctx, tol=tol), associator=self._associator(merge, tol),
                       progress=lambda s, f: None)
         runner = Runner(run, dict(timing))
-        return self._result(runner(ASSOCIATION, seg.copy()), run, runner.timing, saved)
+        # The fit's own state stays this object's (segmentation_ goes with result_); the new
+        # result records the options it was made with.
+        kept = self.segmentation_
+        try:
+            out = self._result(runner(ASSOCIATION, seg.copy()), run, runner.timing, saved)
+        finally:
+            self.segmentation_ = kept
+        if association is not None:
+            out.options["association"] = dict(association)
+        return out
 
     def _subsample(self, points: np.ndarray) -> Subsample | None:
         """The even subsample recognition runs on, the distinct points of a cloud with exact

@@ -149,19 +149,21 @@ def summary_table(result: Result) -> str:
     (:func:`groups_table`) when there are any, and the wall-clock
     time, total then per stage.  No trailing newline.
     """
-    header = f"{'family':<12}{'segments':>9}{'points':>10}{'mean MFE':>11}{'max MFE':>11}"
-    lines = [header, "-" * len(header)]
     rows = _family_rows(result)
+    # The first column as wide as the longest family name (generalized_cylinder: 20).
+    w = max([12] + [len(r[0]) + 1 for r in rows])
+    header = f"{'family':<{w}}{'segments':>9}{'points':>10}{'mean MFE':>11}{'max MFE':>11}"
+    lines = [header, "-" * len(header)]
     for i, (name, n_seg, n_pts, mean_mfe, max_mfe) in enumerate(rows):
         if i == len(rows) - 1:
             lines.append("-" * len(header))
-        lines.append(f"{name:<12}{n_seg:>9d}{n_pts:>10d}  {_fmt_mfe(mean_mfe)}  {_fmt_mfe(max_mfe)}")
+        lines.append(f"{name:<{w}}{n_seg:>9d}{n_pts:>10d}  {_fmt_mfe(mean_mfe)}  {_fmt_mfe(max_mfe)}")
     n_unseg = len(result.unsegmented)
     share = 100.0 * n_unseg / result.n_points if result.n_points else 0.0
-    lines.append(f"{'unsegmented':<12}{'':>9}{n_unseg:>10d}  ({share:.1f}% of {result.n_points} points)")
+    lines.append(f"{'unsegmented':<{w}}{'':>9}{n_unseg:>10d}  ({share:.1f}% of {result.n_points} points)")
     derived = result.options.get("derived") if isinstance(result.options, dict) else None
     if derived:
-        lines.append(f"{'scales':<12}noise {derived['noise_policy']}: sigma {derived['sigma']:.3g}, "
+        lines.append(f"{'scales':<{w}}noise {derived['noise_policy']}: sigma {derived['sigma']:.3g}, "
                      f"spacing {derived['spacing']:.3g}, tau {derived['tau']:.3g}, "
                      f"epsilon {derived['epsilon']:.3g} (input units)")
     if result.groups:

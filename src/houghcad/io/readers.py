@@ -417,36 +417,53 @@ def validate_points(
     if problem:
         raise InputError(f"{name}: {problem}")
     if return_normals:
-        return pts, clean_normals(normals, n)
+        return pts, clean_normals(normals, n, name)
     return pts
 
 
-def clean_normals(normals: np.ndarray | None, n_points: int) -> np.ndarray | None:
+def clean_normals(normals: np.ndarray | None, n_points: int, source: str | None = None) -> np.ndarray | None:
     """Normals as (n_points, 3) unit float64, or None when they are unusable.
 
     Unusable means: wrong shape, non-numeric, any non-finite value or any
     (near) zero-length row.  Dropping them lets the pipeline estimate its own
-    normals instead of failing on a cosmetic defect of the file.
+    normals instead of failing on a cosmetic defect of the file; an
+    :class:`~houghcad.errors.InputWarning` naming ``source`` says why.
     """
+    unit, problem = _checked_normals(normals, n_points)
+    if problem:
+        import warnings
+
+        from ..errors import InputWarning
+
+        warnings.warn(f"{source or 'input'}: the normals given are not used ({problem}); houghcad estimates "
+                      "its own", InputWarning, stacklevel=3)
+    return unit
+
+
+def _checked_normals(normals: np.ndarray | None, n_points: int) -> tuple[np.ndarray | None, str | None]:
+    """(unit normals or None, why they are unusable or None): see :func:`clean_normals`."""
     if normals is None:
-        return None
+        return None, None
     nrm = np.asarray(normals)
-    if nrm.dtype.kind not in "iuf" or nrm.shape != (n_points, 3):
-        return None
+    if nrm.dtype.kind not in "iuf":
+        return None, f"non-numeric values (dtype {nrm.dtype})"
+    if nrm.shape != (n_points, 3):
+        return None, f"shape {nrm.shape} for {n_points} points"
     with np.errstate(over="ignore", invalid="ignore"):  # float128 beyond float64: inf, dropped below
         nrm = nrm.astype(np.float64)
-    if not np.isfinite(nrm).all():
-        return None
+    bad = ~np.isfinite(nrm).all(axis=1)
+    if bad.any():
+        return None, f"a NaN or infinite value at row {int(np.flatnonzero(bad)[0]) + 1}"
     # Each row scaled by its largest component first: squares of components near the float64
     # limit would overflow (a zero "unit" normal), those of tiny ones underflow.
     scale = np.abs(nrm).max(axis=1)
-    if (scale == 0.0).any():
-        return None
-    unit = nrm / scale[:, None]
-    length = np.linalg.norm(unit, axis=1)  # in [1, sqrt(3)]
-    if (scale < 1e-12 / length).any():  # the normal's own length below 1e-12
-        return None
-    return np.ascontiguousarray(unit / length[:, None])
+    safe = np.where(scale == 0.0, 1.0, scale)
+    unit = nrm / safe[:, None]
+    length = np.linalg.norm(unit, axis=1)  # in [1, sqrt(3)], 0 for a zero row
+    zero = (scale == 0.0) | (scale < 1e-12 / np.maximum(length, 1.0))  # the normal's own length below 1e-12
+    if zero.any():
+        return None, f"a zero-length normal at row {int(np.flatnonzero(zero)[0]) + 1}"
+    return np.ascontiguousarray(unit / length[:, None]), None
 
 
 # --------------------------------------------------------------------------- helpers
