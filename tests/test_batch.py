@@ -18,7 +18,7 @@ import pytest
 
 import houghcad
 from houghcad import synth
-from houghcad.batch import BatchRow, CloudJob, segment_cloud
+from houghcad.batch import MEASURES, BatchRow, CloudJob, SegmentOptions, segment_cloud
 from houghcad.batchcli import Progress
 from houghcad.cli import main
 from houghcad.io import write_points_ply
@@ -98,7 +98,7 @@ def test_folder_gives_one_row_per_cloud_and_exit_1_for_the_corrupt_file(first_ru
     with_gt = [r for r in parts if r["input"].endswith(".txt")]
     assert all(float(r["DSC"]) > 0.8 for r in with_gt) and all(r["DSC"] == "" for r in parts if r not in with_gt)
     dsc = [float(r["DSC"]) for r in with_gt]
-    assert [c[0] for c in closing] == ["# mean", "# median"]
+    assert [c[0] for c in closing] == ["# mean over 2 clouds", "# median over 2 clouds"]
     assert float(closing[0][7]) == pytest.approx(np.mean(dsc), abs=1e-5)
     assert "6 clouds: 5 ok, 0 skipped, 1 error" in stdout
     assert "Dask dashboard: http://127.0.0.1:" in stderr and "[6/6]" in stderr  # one line per cloud off a TTY
@@ -153,6 +153,65 @@ def test_rerun_skips_then_force_on_one_worker_gives_the_same_results(first_run, 
     assert code == 0 and [r["status"] for r in _summary(out)[0]] == ["ok", "ok"]
     for stem in ("part0", "part1"):  # one worker or two: the same results
         assert _result(out / f"{stem}_segments.json") == _result(first / f"{stem}_segments.json")
+
+
+def test_skipped_clouds_are_scored_again_from_their_saved_results(first_run, clouds: Path, tmp_path: Path):
+    """A batch of one cloud into OUTDIR wrote a summary.csv listing that cloud alone; the next
+    full batch's skipped rows then lost their measures and '# mean' averaged the one cloud left
+    (and so after deleting summary.csv). A skipped cloud is scored from its saved result."""
+    _, first, *_ = first_run
+    out = tmp_path / "out"
+    shutil.copytree(first, out)
+    parts = [str(clouds / n) for n in ("part0.ply", "part1.txt", "part2.ply", "part3.txt", "part4.ply")]
+    options = ["-o", str(out), "--fit4cad", "--report", *SEGMENT_OPTIONS]
+    before = {r["input"]: r for r in _summary(first)[0]}
+    first_closing = _summary(first)[1]
+    assert _run(["batch", parts[1], *options])[0] == 0
+    assert [r["input"] for r in _summary(out)[0]] == [parts[1]]
+    for case in ("after a batch of one cloud", "without summary.csv"):
+        code, stdout, _ = _run(["batch", *parts, *options])  # all up to date: no cluster starts
+        rows, closing = _summary(out)
+        assert code == 0 and [r["status"] for r in rows] == ["skipped"] * 5, (case, stdout)
+        for r in rows:
+            for column in ("n_points", "n_segments", "unsegmented", "error", *MEASURES):
+                assert r[column] == before[r["input"]][column], (case, r["input"], column)
+        assert sum(bool(r["DSC"]) for r in rows) == 2
+        assert closing == first_closing, case  # '# mean over 2 clouds', the same figures
+        (out / "summary.csv").unlink()
+    page = (out / "index.html").read_text()
+    assert "mean over 2 clouds" in page
+
+
+def test_a_saved_result_that_cannot_be_read_is_run_again(clouds: Path, tmp_path: Path):
+    from houghcad.batch import plan
+
+    (tmp_path / "part1_segments.json").write_text('{"n_points": 2000, "segments": [{"id": 0')  # cut short
+    (tmp_path / "part3_segments.json").write_text(json.dumps(
+        {"n_points": N_POINTS, "segments": [{"id": 0, "type": "plane"}], "unsegmented": []}))  # no indices
+    planned = plan([str(clouds / "part1.txt"), str(clouds / "part3.txt")], tmp_path, SegmentOptions())
+    assert [row for _, row in planned] == [None, None]
+
+
+def test_a_cloud_that_returned_past_its_timeout_is_an_error_with_no_outputs(tmp_path: Path):
+    from houghcad.batch import _finished
+    from houghcad.engine import Outcome
+
+    job = CloudJob(str(tmp_path / "a.ply"), "a.ply", str(tmp_path), "a", ("report", "json"), SegmentOptions())
+    for name in ("a_report.html", "a_segments.json"):
+        (tmp_path / name).write_text("{}")
+    late = BatchRow("a.ply", "ok", 10, 1, 0, 1.19, outputs=("a_report.html", "a_segments.json"))
+    rows: dict[int, BatchRow] = {}
+    _finished(None, rows, 0, job, Outcome(0, "timeout", value=late, error="timeout after 1 s (it ran 1.20 s)",
+                                          seconds=1.2))
+    assert rows[0].status == "error" and rows[0].error == "timeout after 1 s (it ran 1.20 s)"
+    assert rows[0].seconds == 1.2 and rows[0].outputs == ()
+    assert not (tmp_path / "a_segments.json").exists() and not (tmp_path / "a_report.html").exists()
+
+
+def test_timeout_help_says_what_it_bounds():
+    code, stdout, _ = _run(["batch", "--help"])
+    text = " ".join(stdout.split())
+    assert code == 0 and "measured there from when the cloud starts" in text and "within about 0.1 s" in text
 
 
 # --------------------------------------------------------------------------- a worker killed mid-batch

@@ -28,11 +28,23 @@ def test_summary_csv_has_the_columns_and_closing_means_and_medians():
     lines = text.splitlines()
     assert lines[0] == "input,status,n_points,n_segments,unsegmented,seconds,error,DSC,PPV,TPR,TNR,NPV,ACC"
     rows = list(csv.DictReader(io.StringIO(text)))
-    assert [r["input"] for r in rows] == ["a/p1.txt", "a/p2.txt", "b/x <&> y.ply", "a/p3.txt", "# mean", "# median"]
+    assert [r["input"] for r in rows] == ["a/p1.txt", "a/p2.txt", "b/x <&> y.ply", "a/p3.txt",
+                                          "# mean over 3 clouds", "# median over 3 clouds"]
     assert rows[1]["error"] == "a/p2.txt: file is empty" and rows[2]["DSC"] == "" and rows[0]["seconds"] == "1.25"
     assert float(rows[4]["DSC"]) == pytest.approx(0.5) and float(rows[5]["DSC"]) == pytest.approx(0.6)
     assert rows[4]["status"] == "" and rows[4]["n_points"] == ""
     assert "# mean" not in summary_csv([ROWS[2]])  # no ground truth: no closing lines
+
+
+def test_the_closing_lines_say_how_many_clouds_they_cover():
+    # A mean over fewer clouds than the batch scored would pass unnoticed: the line names its count.
+    skipped = BatchRow("a/p4.txt", "skipped", 800, 3, 0, None, DSC=0.7, PPV=0.7, TPR=0.7, TNR=0.7, NPV=0.7, ACC=0.7)
+    closing = [line.split(",")[0] for line in summary_csv([*ROWS, skipped]).splitlines() if line.startswith("#")]
+    assert closing == ["# mean over 4 clouds", "# median over 4 clouds"]
+    one = [line.split(",")[:8] for line in summary_csv([ROWS[2], skipped]).splitlines() if line.startswith("#")]
+    assert one == [["# mean over 1 cloud", *[""] * 6, "0.7"], ["# median over 1 cloud", *[""] * 6, "0.7"]]
+    page = index_html([*ROWS, skipped])
+    assert ">mean over 4 clouds</td>" in page and ">median over 4 clouds</td>" in page
 
 
 def test_write_and_read_back_keeps_ok_and_skipped_rows(tmp_path: Path):

@@ -34,6 +34,36 @@ def die(code: int) -> int:
     os._exit(code)
 
 
+def nap_or_die(item: tuple[str, float, str]) -> str:
+    """``("nap", s, _)`` sleeps s seconds; ``("again", s, marker)`` returns at once the first
+    time and sleeps s seconds when computed again; ``("die", _, marker)`` writes the marker and
+    kills its worker."""
+    kind, seconds, marker = item
+    if kind == "again":
+        if not Path(marker).exists():
+            Path(marker).write_text("first")
+            return "first"
+        time.sleep(seconds)
+        return "again"
+    if kind == "die":
+        report("dying")  # a round trip: the start event is delivered before the process ends
+        Path(marker).write_text("died")
+        os._exit(3)
+    time.sleep(seconds)
+    return kind
+
+
+def slow_setup() -> None:
+    time.sleep(1.5)
+
+
+@pytest.fixture(scope="module")
+def one_worker():
+    """One single-threaded worker, no retries, tasks timed out after 1 s."""
+    with Engine(workers=1, retries=0, timeout=1) as engine:
+        yield engine
+
+
 def test_outcomes_in_order_with_retries_timeouts_events_and_memory(tmp_path: Path):
     items = [("ok", 1, ""), ("flaky", 2, str(tmp_path / "flaky")), ("bad", 3, ""), ("hang", 4, ""),
              ("big", 5, ""), ("ok", 6, "")]
@@ -60,6 +90,63 @@ def test_a_dead_worker_is_an_outcome_with_its_exit_code_and_the_run_goes_on():
         died, done = engine.run(die, [7]), engine.run(abs, [-3])
     assert died == [Outcome(0, "died", error="worker died (exit code 7)", attempts=1, worker=died[0].worker)]
     assert done[0].status == "done" and done[0].value == 3
+
+
+def test_a_timeout_costs_the_tasks_queued_behind_it_nothing(one_worker):
+    # The timed-out task's worker got the next task as soon as the task was cancelled, then was
+    # restarted: that innocent task counted a worker death and, with no retries, ended "died".
+    t0 = time.monotonic()
+    out = one_worker.run(nap_or_die, [("nap", 60, ""), ("nap", 0.1, ""), ("nap", 0.1, "")])
+    assert [o.status for o in out] == ["timeout", "done", "done"], out
+    assert out[0].error == "timeout after 1 s" and [o.attempts for o in out[1:]] == [1, 1]
+    assert time.monotonic() - t0 < 20
+
+
+def test_a_task_that_returns_past_its_time_is_a_timeout(one_worker):
+    # The client's loop busy (here in on_outcome; it was in a worker's restart) while a task runs
+    # past its time and returns: it came back "done", its time over the limit.
+    out = one_worker.run(nap_or_die, [("nap", 0.0, ""), ("nap", 1.4, "")],
+                         on_outcome=lambda o: time.sleep(2.5) if o.index == 0 else None)
+    assert [o.status for o in out] == ["done", "timeout"], out
+    assert out[1].seconds > 1.3 and out[1].value == "nap" and out[1].error.startswith("timeout after 1 s (it ran 1.")
+    assert out[0].seconds < 1
+
+
+def test_the_setup_of_a_worker_is_not_charged_to_the_task(one_worker):
+    out = one_worker.run(abs, [-2], setup=slow_setup)
+    assert out[0].status == "done" and out[0].value == 2 and out[0].seconds < 1
+
+
+def test_a_result_lost_with_its_worker_is_computed_again(one_worker, tmp_path: Path):
+    # "again" returns, then "die" kills their worker before the client took the result (it is
+    # busy in on_outcome): Dask computes "again" anew. It came back "failed: NoneType: None"
+    # (the exception of a future that has none).
+    marker = tmp_path / "died"
+
+    def wait_for_the_death(o: Outcome) -> None:
+        if o.index == 0:
+            while not marker.exists():
+                time.sleep(0.02)
+            time.sleep(0.3)
+
+    out = one_worker.run(nap_or_die, [("nap", 0.0, ""), ("again", 0.5, str(tmp_path / "again")), ("die", 0, str(marker))],
+                         on_outcome=wait_for_the_death)
+    assert [o.status for o in out] == ["done", "done", "died"], out
+    assert out[1].value == "again" and out[2].error == "worker died (exit code 3)"
+    assert not any("NoneType" in (o.error or "") for o in out)
+
+
+def test_an_erred_future_without_an_exception_says_so():
+    class Erred:
+        status = "error"
+
+        def exception(self):
+            return None
+
+    from houghcad.engine import _Running
+
+    outcome = Engine()._outcome(_Running(4, Erred(), attempts=1), Erred())
+    assert outcome.status == "died" and outcome.error == "worker lost the task without an error"
 
 
 def test_bad_arguments_and_use_outside_a_cluster():

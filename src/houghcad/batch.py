@@ -58,7 +58,9 @@ class BatchRow:
         The cloud's path as given (or as found in a given folder or pattern).
     status : str
         ``"ok"`` (segmented now), ``"error"`` (``error`` says why) or ``"skipped"`` (its outputs
-        were already there and not older than the input; the figures are the previous run's).
+        were already there and not older than the input; the counts and measures are those of
+        its saved result, scored again against the ground truth beside the cloud, and
+        ``seconds`` is the previous ``summary.csv``'s when it lists the cloud).
     n_points, n_segments, unsegmented : int or None
         Points of the cloud, segments found, points left unsegmented.
     seconds : float or None
@@ -205,15 +207,26 @@ def _up_to_date(job: CloudJob) -> bool:
         return False
 
 
-def _counts(job: CloudJob) -> dict[str, int]:
-    """Points, segments and unsegmented points of a result that no summary lists (its batch was
-    interrupted as the cloud finished)."""
+def _saved_figures(job: CloudJob) -> tuple[dict[str, Any], str | None] | None:
+    """Figures of a cloud's saved result (``<stem>_segments.json``): points, segments, unsegmented
+    points and, when a ground truth sits beside the cloud, the measures scored against it as
+    :func:`segment_cloud` scores a new result; with the message of a ground truth that cannot be
+    used. None when the result cannot be read (the cloud then runs again)."""
     try:
         data = json.loads(job.output_path("json").read_text(encoding="utf-8"))
-        return {"n_points": int(data["n_points"]), "n_segments": len(data["segments"]),
-                "unsegmented": len(data["unsegmented"])}
+        figures: dict[str, Any] = {"n_points": int(data["n_points"]), "n_segments": len(data["segments"]),
+                                   "unsegmented": len(data["unsegmented"])}
     except (OSError, ValueError, KeyError, TypeError):
-        return {}
+        return None
+    if job.ground_truth is None:
+        return figures, None
+    from .result import Result  # numpy: only when there is something to score
+
+    try:
+        measures, gt_error = _measures(job, Result.from_dict(data))
+    except (ValueError, KeyError, TypeError, IndexError, OverflowError):  # a result that is not whole
+        return None
+    return figures | measures, gt_error
 
 
 def plan(inputs: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[str], options: SegmentOptions,
@@ -222,7 +235,10 @@ def plan(inputs: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[st
     """The batch's clouds in order, each with its ``skipped`` row when it needs no run.
 
     ``outputs`` are keys of :data:`OUTPUT_NAMES` besides ``"json"``; ``previous`` maps inputs to
-    the rows of an earlier ``summary.csv``, whose figures a skipped row keeps.
+    the rows of an earlier ``summary.csv``, whose ``seconds`` a skipped row keeps. A skipped row's
+    counts and measures come from the cloud's saved result, scored again against the ground truth
+    beside the cloud (whatever batch wrote that result, and whether or not a summary lists it); a
+    saved result that cannot be read is not up to date.
     """
     unknown = set(outputs) - set(OUTPUT_NAMES)
     if unknown:
@@ -237,11 +253,12 @@ def plan(inputs: Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[st
         job = CloudJob(str(path.absolute()), display, str(out), path.stem, kinds, options,
                        str(gt.absolute()) if gt is not None else None)
         skipped = None
-        if not force and _up_to_date(job):
+        saved = _saved_figures(job) if not force and _up_to_date(job) else None
+        if saved is not None:
+            figures, gt_error = saved
             before = (previous or {}).get(display)
-            carried = {f.name: getattr(before, f.name) for f in fields(BatchRow)
-                       if f.name not in ("input", "status", "error", "outputs")} if before else _counts(job)
-            skipped = BatchRow(display, "skipped", outputs=tuple(job.output_path(k).name for k in kinds), **carried)
+            skipped = BatchRow(display, "skipped", seconds=before.seconds if before else None, error=gt_error,
+                               outputs=tuple(job.output_path(k).name for k in kinds), **figures)
         planned.append((job, skipped))
     return planned
 
@@ -298,6 +315,12 @@ def _write_outputs(job: CloudJob, cloud: Any, result: Any) -> tuple[str, ...]:
     _write_views(cloud, result, views["ply"], views["png"], views["report"])
     _write(job.output_path("json"), write_json, result.to_dict())
     return tuple(job.output_path(k).name for k in job.outputs)
+
+
+def load_libraries() -> None:
+    """What :func:`segment_cloud` imports, loaded before a cloud starts on a worker (the engine's
+    ``setup``): a fresh worker's imports are not charged to its first cloud's time and timeout."""
+    from . import cli, evaluate, io, pipeline  # noqa: F401
 
 
 def segment_cloud(job: CloudJob) -> BatchRow:
@@ -385,7 +408,11 @@ def batch(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out
     retries : int
         Extra attempts for a cloud whose worker died (local cluster) or that raised an OSError.
     timeout : float, optional
-        Seconds one cloud may take; past that it is an ``error`` row and its worker restarts.
+        Seconds one cloud may run on its worker, measured there from the moment the cloud starts
+        (reading, segmenting, writing, scoring; time queued for a free worker does not count).
+        A cloud still running past it is stopped within about 0.1 s (its worker restarts) and
+        a cloud that returns having run longer is an ``error`` row as well (its outputs are
+        removed, so that a re-run runs it again): an ``ok`` row always ran within the limit.
     force : bool
         Run every cloud, even those whose outputs are newer than the input.
     fit4cad, ply, png, report : bool
@@ -427,7 +454,7 @@ def batch(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out
         if progress is not None:
             progress.begin(len(planned), list(rows.values()), engine.dashboard_link)
         try:
-            engine.run(task, [planned[i][0] for i in todo],
+            engine.run(task, [planned[i][0] for i in todo], setup=load_libraries,
                        on_event=lambda k, ev: _started(progress, planned[todo[k]][0], ev),
                        on_outcome=lambda o: _finished(progress, rows, todo[o.index], planned[todo[o.index]][0], o))
         finally:  # also when interrupted: the summary of the clouds finished so far
@@ -463,7 +490,13 @@ def _finished(progress: BatchProgress | None, rows: dict[int, BatchRow], i: int,
         row = outcome.value
         row.peak_mb = outcome.peak_mb
     else:
-        row = error_row(job, outcome.error or outcome.status)
+        if outcome.status == "timeout" and isinstance(outcome.value, BatchRow):
+            # It returned, past its time, having written its outputs: an error row leaves none
+            # (the next run runs it again instead of skipping it).
+            for name in outcome.value.outputs:
+                with contextlib.suppress(OSError):
+                    os.unlink(Path(job.out_dir) / name)
+        row = error_row(job, outcome.error or outcome.status, outcome.seconds)
     rows[i] = row
     if progress is not None:
         progress.finished(row)

@@ -54,7 +54,11 @@ def add_batch_parser(sub: Any) -> None:
                    help="extra attempts for a cloud whose worker died (local cluster) or that hit an I/O error "
                    "(default: 2)")
     p.add_argument("--timeout", type=_seconds, default=None, metavar="SECONDS",
-                   help="time one cloud may take; past that it is an error and its worker restarts (default: none)")
+                   help="time one cloud may run on its worker, measured there from when the cloud starts (reading, "
+                   "segmenting, writing, scoring; waiting for a free worker does not count): a cloud still running "
+                   "past it is stopped within about 0.1 s and its worker restarted, and a cloud that finished "
+                   "having run longer is an error too (its outputs are removed); an ok row always ran within "
+                   "SECONDS (default: none)")
     p.add_argument("--force", action="store_true",
                    help="run every cloud, even those whose outputs are already there and newer than the input")
     add_segment_options(p)

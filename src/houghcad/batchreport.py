@@ -1,8 +1,9 @@
 """The batch's summary: ``summary.csv`` and a self-contained ``index.html`` (both written atomically).
 
 ``summary.csv`` has one row per input with the columns :data:`COLUMNS`, in the inputs' order;
-when some clouds have a Fit4CAD ground truth, two closing lines starting ``# mean`` and
-``# median`` give the measures' means and medians over those clouds (``error`` rows count 0), so
+when some clouds have a Fit4CAD ground truth, two closing lines ``# mean over N clouds`` and
+``# median over N clouds`` give the measures' means and medians over those N clouds (``error``
+rows count 0; ``skipped`` rows are scored from their saved results), so
 ``pandas.read_csv(path, comment="#")`` reads the clouds alone. ``index.html`` shows the same rows
 in a table sorted by clicking a column's header (a few lines of inline JavaScript, no network),
 each row linking to its files in the same folder.
@@ -59,13 +60,17 @@ def _cell(value: object) -> str:
 
 
 def _stats(rows: Sequence[BatchRow]) -> dict[str, dict[str, float]]:
-    """``{"mean": {...}, "median": {...}}`` of each measure over the rows that have it."""
-    out: dict[str, dict[str, float]] = {"mean": {}, "median": {}}
+    """``{"mean over N clouds": {...}, "median over N clouds": {...}}``: each measure over the N
+    rows that have measures ({} for both when none has)."""
+    scored = [r for r in rows if r.measures()]
+    over = f"over {len(scored)} cloud{'s' if len(scored) != 1 else ''}"
+    out: dict[str, dict[str, float]] = {f"mean {over}": {}, f"median {over}": {}}
+    mean, median = out.values()
     for m in MEASURES:
-        values = [getattr(r, m) for r in rows if getattr(r, m) is not None]
+        values = [getattr(r, m) for r in scored if getattr(r, m) is not None]
         if values:
-            out["mean"][m] = statistics.fmean(values)
-            out["median"][m] = statistics.median(values)
+            mean[m] = statistics.fmean(values)
+            median[m] = statistics.median(values)
     return out
 
 
@@ -177,8 +182,9 @@ def index_html(rows: Sequence[BatchRow], outputs: Sequence[str] = ()) -> str:
     counts = ", ".join(f"{sum(r.status == s for r in rows)} {s}" for s in ("ok", "skipped", "error"))
     stats = _stats(rows)
     table = ""
-    if stats["mean"]:
-        names = list(stats["mean"])
+    means = next(iter(stats.values()))
+    if means:
+        names = list(means)
         table = ("<table><tr><th></th>" + "".join(f"<th>{m}</th>" for m in names) + "</tr>"
                  + "".join(f'<tr><td class="t">{k}</td>' + "".join(f"<td>{v[m]:.3f}</td>" for m in names) + "</tr>"
                            for k, v in stats.items()) + "</table>\n<p></p>")

@@ -8,8 +8,16 @@ scheduling; this module adds what a batch of long, independent tasks needs on to
 - tasks that raise are retried (``retries=`` of ``Client.submit``); a worker that dies mid-task
   has its task rescheduled on another worker by the scheduler (``allowed-failures``, set to
   ``retries`` on the clusters the engine starts), and past that the item ends ``died``;
-- a task running longer than ``timeout`` seconds is cancelled and its worker restarted (a thread
-  cannot be stopped): the item ends ``timeout``;
+- a task may run ``timeout`` seconds, measured from the moment it starts on its worker (time
+  queued for a worker does not count, nor does the ``setup`` that loads the libraries of a fresh
+  worker). The client checks every ``POLL`` seconds, from the task's start event: a task still
+  running past its time ends ``timeout``, is cancelled and its worker process killed and replaced
+  by its nanny (a thread cannot be stopped), about 0.05 s after its time on a local cluster. A
+  task that returns having run longer (in that gap) ends ``timeout`` as well: ``done`` always
+  means "within the limit". The stopping runs beside the loop, so that the other tasks' clocks
+  are still watched meanwhile, and no task is handed to the worker being stopped;
+- a task whose result was lost with its worker before the client took it (a worker restarted or
+  dead) is computed again by Dask; the engine waits for it rather than reporting the loss;
 - tasks tell the client when they start and, through :func:`report`, anything else (Dask's
   structured events), so a progress display knows what is running;
 - the peak resident memory of each task (its worker's, reset when the task starts).
@@ -43,8 +51,10 @@ TOPIC = "houghcad-engine"
 POLL = 0.05
 #: Seconds to wait for a worker's exit code after its task was declared dead.
 EXIT_CODE_WAIT = 2.0
-#: Seconds a worker restarted after a timeout may take to come back.
-RESTART_TIMEOUT = 30.0
+#: Seconds to wait, at the end of a run, for the stopping of workers whose task ran past its time.
+STOP_WAIT = 30.0
+#: States of a client future that has ended for good (a "lost" future is computed again).
+_ENDED = ("finished", "error", "cancelled")
 _DEATH = re.compile(r"Worker process (\d+) (?:exited with status|was killed by signal) (\d+)")
 
 
@@ -90,11 +100,15 @@ class Outcome:
         ``"done"`` (``value`` holds the return value), ``"failed"`` (the task raised on every
         attempt), ``"died"`` (its worker died on every attempt), ``"timeout"`` or ``"cancelled"``.
     value : Any
-        The task's return value when ``done``.
+        The task's return value when ``done``, or when it returned past its time (``timeout``
+        with ``seconds`` set).
     error : str or None
         One line saying what went wrong.
     attempts : int
         Times a worker started the task (more than 1 after a retry).
+    seconds : float or None
+        Wall time of the last attempt on its worker, from its start to its return (None when it
+        did not return).
     worker : str or None
         Address of the worker that ran the last attempt.
     peak_mb : float or None
@@ -113,6 +127,7 @@ class Outcome:
     worker: str | None = None
     peak_mb: float | None = None
     peak_scope: str = "task"
+    seconds: float | None = None
 
 
 # --------------------------------------------------------------------------- inside a task
@@ -162,14 +177,26 @@ def report(kind: str, **data: Any) -> None:
         get_client().log_event(TOPIC, found[1])
 
 
-def _run_item(func: Callable[[Any], Any], item: Any) -> tuple[Any, float, str]:
-    """The task: ``func(item)``, announced to the client, with its peak memory."""
+def _kill_worker_process(dask_worker: Any) -> None:
+    """Run on a worker's nanny (``Client.run(nanny=True)``): kill the worker process at once
+    (SIGKILL: its task's thread cannot be stopped otherwise); the nanny starts a new one."""
+    pid = getattr(getattr(getattr(dask_worker, "process", None), "process", None), "pid", None)
+    if pid:
+        os.kill(pid, signal.SIGKILL)
+
+
+def _run_item(func: Callable[[Any], Any], setup: Callable[[], Any] | None, item: Any) -> tuple[Any, float, str, float]:
+    """The task: ``setup()`` (not timed), then ``func(item)`` announced to the client; returns the
+    value, the peak memory and the seconds from the announcement to the return."""
+    if setup is not None:
+        setup()
     scope = "task" if reset_peak_rss() else "worker"
+    t0 = time.monotonic()
     found = _message("start", {})
     if found is not None:
         found[0].log_event(TOPIC, found[1])  # batched: no round trip
     value = func(item)
-    return value, peak_rss_mb(), scope
+    return value, peak_rss_mb(), scope, time.monotonic() - t0
 
 
 # --------------------------------------------------------------------------- client side
@@ -220,7 +247,7 @@ class _Running:
 
     index: int
     future: Any
-    started: float | None = None  # time.monotonic() of the last start event
+    started: float | None = None  # time.monotonic() of the last start event (None: not running)
     attempts: int = 0
     pids: list[int] = field(default_factory=list)
     worker: str | None = None
@@ -243,8 +270,10 @@ class Engine:
         Extra attempts of a task that raises, and, on a cluster the engine starts, of a task whose
         worker dies (Dask's ``allowed-failures``); an external scheduler keeps its own setting.
     timeout : float, optional
-        Seconds one task may run (from its start on a worker) before it is cancelled and its
-        worker restarted.
+        Seconds one task may run, from its start on a worker (queueing and ``setup`` excluded):
+        past that it is cancelled and its worker restarted (the check runs every ``POLL``
+        seconds, on the client's clock from the task's start event), and a task that returns
+        having run longer ends ``timeout`` too.
     """
 
     def __init__(self, client: Any = None, *, workers: int | None = None, scheduler: str | None = None,
@@ -263,6 +292,8 @@ class Engine:
         self._stack: contextlib.ExitStack | None = None
         self._local = False  # a local cluster started here: its nannies log in this process
         self._codes = _ExitCodes()
+        self._restarts: list[threading.Thread] = []  # workers being restarted after a timeout
+        self._stopped: set[tuple[Any, int]] = set()  # (address, pid) of workers stopped after a timeout
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -313,14 +344,16 @@ class Engine:
 
     def run(self, func: Callable[[Any], Any], items: Sequence[Any], *,
             on_event: Callable[[int, dict[str, Any]], None] | None = None,
-            on_outcome: Callable[[Outcome], None] | None = None) -> list[Outcome]:
+            on_outcome: Callable[[Outcome], None] | None = None,
+            setup: Callable[[], Any] | None = None) -> list[Outcome]:
         """Run ``func(item)`` for every item; returns one :class:`Outcome` per item, in order.
 
-        ``func`` and the items must pickle (``func`` by reference: a module-level function of
-        a module the workers can import). ``on_event(index, event)`` gets every event of an
-        item's task (``event["kind"]`` is ``"start"`` or what the task passed to :func:`report`),
-        ``on_outcome`` each outcome as it comes. On an interruption the remaining tasks are
-        cancelled.
+        ``func``, ``setup`` and the items must pickle (functions by reference: module-level
+        functions of a module the workers can import). ``on_event(index, event)`` gets every
+        event of an item's task (``event["kind"]`` is ``"start"`` or what the task passed to
+        :func:`report`), ``on_outcome`` each outcome as it comes. ``setup()`` runs on the worker
+        before each task starts, outside its time (say, imports that a fresh worker pays once).
+        On an interruption the remaining tasks are cancelled.
         """
         if self.client is None:
             raise RuntimeError("Engine.run outside its 'with' block")
@@ -331,7 +364,8 @@ class Engine:
         client.subscribe_topic(TOPIC, lambda ev: events.put(ev[1]))
         keys = [f"houghcad-{token}-{i}" for i in range(len(items))]
         # One map, one message to the scheduler, however many items.
-        futures = client.map(functools.partial(_run_item, func), items, key=keys, retries=self.retries, pure=False)
+        futures = client.map(functools.partial(_run_item, func, setup), items, key=keys, retries=self.retries,
+                             pure=False)
         running = {f.key: _Running(i, f) for i, f in enumerate(futures)}
         del futures
         done = as_completed([r.future for r in running.values()])
@@ -342,11 +376,18 @@ class Engine:
                 interrupted.check()
                 busy = self._take_events(events, running, on_event)
                 for future in done.next_batch(block=False) if done.has_ready() else []:
-                    state = running.pop(future.key, None)
+                    busy = True
+                    state = running.get(future.key)
+                    if state is not None and future.status not in _ENDED:
+                        # It finished, then its result was lost with its worker before this
+                        # loop took it ("lost"): Dask computes it again; wait for that.
+                        state.started = None
+                        done.add(future)
+                        continue
                     if state is not None:
+                        del running[future.key]
                         self._finish(self._outcome(state, future), outcomes, on_outcome)
                     future.release()  # its result would be recomputed if its worker died later
-                    busy = True
                 busy |= self._expire(running, outcomes, on_outcome)
                 if not busy:
                     time.sleep(POLL)
@@ -356,6 +397,7 @@ class Engine:
             client.unsubscribe_topic(TOPIC)
             if running:  # interrupted
                 client.cancel([r.future for r in running.values()])
+            self._wait_for_restarts()
         return [outcomes[i] for i in range(len(items))]
 
     @staticmethod
@@ -364,8 +406,7 @@ class Engine:
         if on_outcome is not None:
             on_outcome(outcome)
 
-    @staticmethod
-    def _take_events(events: queue.SimpleQueue, running: dict[str, _Running],
+    def _take_events(self, events: queue.SimpleQueue, running: dict[str, _Running],
                      on_event: Callable[[int, dict[str, Any]], None] | None) -> bool:
         """Apply the events received since the last call; True if there were any."""
         got = False
@@ -379,9 +420,13 @@ class Engine:
             if state is None:  # another run's task, or one already finished
                 continue
             if event.get("kind") == "start":
-                state.started, state.worker = time.monotonic(), event.get("worker")
+                pid = int(event.get("pid", -1))
+                # A start on a worker being stopped (delivered late): that attempt is lost, its
+                # clock starts again with the next attempt.
+                state.started = time.monotonic() if (event.get("worker"), pid) not in self._stopped else None
+                state.worker = event.get("worker")
                 state.attempts += 1
-                state.pids.append(int(event.get("pid", -1)))
+                state.pids.append(pid)
             if on_event is not None:
                 on_event(state.index, event)
 
@@ -389,13 +434,18 @@ class Engine:
         """The outcome of a finished (or erred, or cancelled) future."""
         base = {"index": state.index, "attempts": max(1, state.attempts), "worker": state.worker}
         if future.status == "finished":
-            value, peak, scope = future.result()
-            return Outcome(status="done", value=value, peak_mb=peak, peak_scope=scope, **base)
+            value, peak, scope, seconds = future.result()
+            if self.timeout is not None and seconds > self.timeout:  # it returned in the gap
+                return Outcome(status="timeout", value=value, error=f"timeout after {self.timeout:g} s "
+                               f"(it ran {seconds:.2f} s)", seconds=seconds, **base)
+            return Outcome(status="done", value=value, peak_mb=peak, peak_scope=scope, seconds=seconds, **base)
         if future.status == "cancelled":
             return Outcome(status="cancelled", error="cancelled", **base)
-        exc = future.exception()
+        exc = future.exception() if future.status == "error" else None
         if type(exc).__name__ == "KilledWorker":
             return Outcome(status="died", error=self._death_message(state), **base)
+        if exc is None:  # Dask gave no error (not seen: run() waits for a lost result to be recomputed)
+            return Outcome(status="died", error="worker lost the task without an error", **base)
         return Outcome(status="failed", error=_one_line(f"{type(exc).__name__}: {exc}"), **base)
 
     def _death_message(self, state: _Running) -> str:
@@ -413,19 +463,60 @@ class Engine:
 
     def _expire(self, running: dict[str, _Running], outcomes: dict[int, Outcome],
                 on_outcome: Callable | None) -> bool:
-        """Cancel the tasks past their time and restart their workers; True if any."""
+        """End the tasks past their time and stop them (their workers restart beside the loop);
+        True if any."""
         if self.timeout is None:
             return False
         now = time.monotonic()
-        late = [(k, s) for k, s in running.items() if s.started is not None and now - s.started >= self.timeout]
+        # A task that returned meanwhile is judged by its own time on its worker, next turn.
+        late = [(k, s) for k, s in running.items() if s.started is not None and now - s.started >= self.timeout
+                and s.future.status not in _ENDED]
         for key, state in late:
             del running[key]
-            self.client.cancel([state.future])
-            if state.worker is not None:
-                self.client.restart_workers([state.worker], timeout=RESTART_TIMEOUT, raise_for_error=False)
+            if state.pids:
+                self._stopped.add((state.worker, state.pids[-1]))
+            for other in running.values():  # queued behind it on that worker: moved, not started
+                if other.worker == state.worker:
+                    other.started = None
+            self._stop(state.future, state.worker)
             self._finish(Outcome(state.index, "timeout", error=f"timeout after {self.timeout:g} s",
                                  attempts=state.attempts, worker=state.worker, peak_mb=None), outcomes, on_outcome)
         return bool(late)
+
+    def _stop(self, future: Any, worker: str | None) -> None:
+        """Stop a task past its time, in a thread beside the loop (three round trips to the
+        scheduler): its worker first stops taking tasks (else the scheduler would hand it the
+        next one as soon as the task is cancelled, and the worker's end would count against that
+        innocent task's attempts), then the task is cancelled, then its nanny kills the worker
+        process at once (a graceful restart lets the task run on for seconds, taking a core from
+        the others) and starts a new one. A worker without a nanny (``dask worker --no-nanny``)
+        cannot be restarted: it is closed, and the batch goes on with the other workers."""
+        client = self.client
+
+        def stop() -> None:
+            if worker is not None:
+                with contextlib.suppress(Exception):
+                    client.retire_workers([worker], close_workers=False, remove=False)
+            with contextlib.suppress(Exception):
+                client.cancel([future])
+            if worker is not None:
+                try:
+                    killed = client.run(_kill_worker_process, workers=[worker], nanny=True)
+                except Exception:
+                    killed = {}
+                if not killed:  # no nanny ran it
+                    with contextlib.suppress(Exception):
+                        client.retire_workers([worker], close_workers=True)
+
+        thread = threading.Thread(target=stop, name="houghcad-engine-restart", daemon=True)
+        thread.start()
+        self._restarts.append(thread)
+
+    def _wait_for_restarts(self) -> None:
+        """Wait for the stopping of the tasks past their time (a run leaves none running)."""
+        deadline = time.monotonic() + STOP_WAIT
+        while self._restarts:
+            self._restarts.pop().join(max(0.0, deadline - time.monotonic()))
 
 
 def _one_line(text: str, limit: int = 500) -> str:
