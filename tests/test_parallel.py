@@ -181,3 +181,22 @@ def test_workers_leave_ctrl_c_to_the_main_process(run):
         while not all(map(ignores_sigint, pids)) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert all(map(ignores_sigint, pids))
+
+
+def test_a_run_uses_one_blas_thread_and_gives_the_callers_back():
+    """BLAS's threads only hand our small products around and spin between calls, taking the
+    other core: a run limits them to one, and the caller's setting comes back after."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    import houghcad
+    from houghcad import synth
+
+    def blas_threads() -> list[int]:
+        return [d["num_threads"] for d in threadpoolctl.threadpool_info() if d["user_api"] == "blas"]
+
+    seen: list[list[int]] = []
+    P = synth.block_with_hole_and_slot(seed=0, n_points=1500).points
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        houghcad.segment(P, families="plane", n_jobs=1, trace=lambda step, name, seg: seen.append(blas_threads()))
+        assert blas_threads() == before
+    assert seen and all(n == 1 for threads in seen for n in threads)

@@ -6,11 +6,17 @@ Python's traceback; here it prints one line and exits 130, as :func:`houghcad.cl
 
 from __future__ import annotations
 
+import os
 import sys
 
 
 def run() -> int:
     """Import the command line, then run it (:func:`houghcad.cli.run`)."""
+    # One BLAS thread unless the user says otherwise, set before numpy loads OpenBLAS, so it
+    # starts no thread pool at all: see houghcad.parallel.blas_one_thread, which does the same
+    # for the Python API while a run lasts.
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
     try:
         from .cli import run as cli_run
     except KeyboardInterrupt:

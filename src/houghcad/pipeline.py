@@ -26,7 +26,7 @@ from .consolidation import consolidate, revisit_poor_fits
 from .context import DEFAULT_PERSISTENCE, Context, derive_context, on_surface
 from .errors import InputError
 from .estimator import ParamsMixin
-from .parallel import Workers, resolve_jobs
+from .parallel import Workers, blas_one_thread, resolve_jobs
 from .planes import prefer_planes
 from .growth import absorb, accept
 from .multires import Subsample, copy_to_twins, distinct_points, propagate, voxel_subsample
@@ -344,6 +344,10 @@ class Segmenter(ParamsMixin):
 
     def fit(self, points: np.ndarray, normals: np.ndarray | None = None, source: str | None = None) -> "Segmenter":
         """Segment ``points`` (n, 3), world units; ``normals`` (n, 3) optional."""
+        with blas_one_thread():
+            return self._fit(points, normals, source)
+
+    def _fit(self, points: np.ndarray, normals: np.ndarray | None, source: str | None) -> "Segmenter":
         from .io import validate_points
         from .io.readers import clean_normals
 
