@@ -39,22 +39,17 @@
     " gl_FragColor = vec4(color * shade, 1.0); }"));
   gl.linkProgram(prog);
   gl.useProgram(prog);
-  var buf = gl.createBuffer();
-  gl.bindBuffer(gl.ARRAY_BUFFER, buf);
-  gl.bufferData(gl.ARRAY_BUFFER, xyz, gl.STATIC_DRAW);
-  ["ax", "ay", "az"].forEach(function (name, a) {
-    var loc = gl.getAttribLocation(prog, name);
-    gl.enableVertexAttribArray(loc);
-    gl.vertexAttribPointer(loc, 1, gl.FLOAT, false, 0, a * n * 4);
-  });
-  var nbuf = gl.createBuffer();
-  gl.bindBuffer(gl.ARRAY_BUFFER, nbuf);
-  gl.bufferData(gl.ARRAY_BUFFER, nrm, gl.STATIC_DRAW);
-  ["bx", "by", "bz"].forEach(function (name, a) {
-    var loc = gl.getAttribLocation(prog, name);
-    gl.enableVertexAttribArray(loc);
-    gl.vertexAttribPointer(loc, 1, gl.BYTE, true, 0, a * n);
-  });
+  function attributes(data, names, type, normalized, bytes) {  // planar columns of one buffer
+    gl.bindBuffer(gl.ARRAY_BUFFER, gl.createBuffer());
+    gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
+    names.forEach(function (name, a) {
+      var loc = gl.getAttribLocation(prog, name);
+      gl.enableVertexAttribArray(loc);
+      gl.vertexAttribPointer(loc, 1, type, normalized, 0, a * n * bytes);
+    });
+  }
+  attributes(xyz, ["ax", "ay", "az"], gl.FLOAT, false, 4);
+  attributes(nrm, ["bx", "by", "bz"], gl.BYTE, true, 1);
   var uRot = gl.getUniformLocation(prog, "rot"), uLight = gl.getUniformLocation(prog, "light");
   gl.uniform3fv(uLight, D.light);
   var uMvp = gl.getUniformLocation(prog, "mvp"), uSize = gl.getUniformLocation(prog, "size"),
