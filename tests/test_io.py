@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from plyfile import PlyData, PlyElement
 
-from houghcad.errors import InputError
+from houghcad.errors import InputError, InputWarning
 from houghcad.io import (
     PointCloud,
     atomic_write,
@@ -599,17 +599,22 @@ def test_validate_points_returns_float64(cloud):
 
 def test_bad_normals_are_dropped(tmp_path, cloud):
     pts, nrm = cloud
-    assert clean_normals(nrm[:-1], N) is None
+    # Each time a warning names the file (or "input") and why the normals are not used.
+    with pytest.warns(InputWarning, match=rf"input: the normals given are not used \(shape \({N - 1}, 3\)"):
+        assert clean_normals(nrm[:-1], N) is None
     bad = nrm.copy()
     bad[3, 0] = np.nan
-    assert clean_normals(bad, N) is None
+    with pytest.warns(InputWarning, match="a NaN or infinite value at row 4"):
+        assert clean_normals(bad, N) is None
     bad = nrm.copy()
     bad[5] = 0.0
-    assert clean_normals(bad, N) is None
+    with pytest.warns(InputWarning, match="a zero-length normal at row 6"):
+        assert clean_normals(bad, N, "part.ply") is None
     np.testing.assert_allclose(np.linalg.norm(clean_normals(nrm * 7.0, N), axis=1), 1.0)
     # through a file: NaN normals do not make the file unreadable
-    pc = read_points(_table(tmp_path / "n.csv", np.hstack([pts, np.full((N, 3), np.nan)]),
-                            header="x,y,z,nx,ny,nz", sep=","))
+    with pytest.warns(InputWarning, match="n.csv: the normals given are not used"):
+        pc = read_points(_table(tmp_path / "n.csv", np.hstack([pts, np.full((N, 3), np.nan)]),
+                                header="x,y,z,nx,ny,nz", sep=","))
     assert pc.normals is None
     np.testing.assert_array_equal(pc.points, pts)
 
