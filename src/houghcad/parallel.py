@@ -72,9 +72,10 @@ def blas_one_thread() -> Iterator[None]:
     Our linear algebra is small (3 x 3 eigenproblems, least squares over a few thousand rows,
     (n, 3) @ (3, 3)): BLAS's threads only hand such work around, and between calls they spin,
     taking the other core from whoever needs it, the forked workers (which inherit the limit)
-    or this process's serial passes. Measured on every 4th Fit4CAD cloud: 48.6 -> 47.2 s with
-    one job, 44.7 -> 40.2 s with two. threadpoolctl, not an environment variable: the libraries
-    are loaded before a run starts, and a program calling us keeps its own setting."""
+    or this process's serial passes. Measured on every 4th Fit4CAD cloud: 48.6 -> 47.4 s with
+    one job, 44.7 -> 41.5-43.6 s with two (the same output). threadpoolctl, not an environment
+    variable: the libraries are loaded before a run starts, and a program calling us keeps its
+    own setting."""
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - a dependency; without it the threads stay
