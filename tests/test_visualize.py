@@ -495,10 +495,10 @@ def test_views_close_the_near_surface():
 
 
 def test_shading_tells_faces_apart_and_keeps_colours():
-    from houghcad.render import _LIGHT, shaded
+    from houghcad.render import LIGHT, shaded
 
     c = np.array([[200, 100, 50]] * 3, dtype=np.uint8)
-    n = np.array([_LIGHT, [0.0, 0.0, 1.0], np.cross(_LIGHT, [0.0, 0.0, 1.0])])
+    n = np.array([LIGHT, [0.0, 0.0, 1.0], np.cross(LIGHT, [0.0, 0.0, 1.0])])
     n /= np.linalg.norm(n, axis=1)[:, None]
     out = shaded(c, n).astype(int)
     assert (out[0] == c[0]).all()  # facing the light: the colour itself

@@ -300,7 +300,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
                   file: Any = None, line: str | None = None) -> None:
     """A warning as one ``houghcad: warning:`` line on stderr, not Python's file:line form."""
-    print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+    _say("warning", message)
 
 
 def _segment(args: argparse.Namespace) -> int:
@@ -413,8 +413,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _error(message: str) -> None:
-    # One line, whatever the message contained.
-    print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr)
+    _say("error", message)
+
+
+def _say(kind: str, message: object) -> None:
+    """``houghcad: KIND: message`` on stderr, in one line whatever the message contained."""
+    print(f"{PROG}: {kind}: {' '.join(str(message).split())}", file=sys.stderr)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

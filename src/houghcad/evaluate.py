@@ -26,7 +26,7 @@ from .groundtruth import (
 )
 from .io import read_points
 from .io.readers import FORMAT_TABLE
-from .result import RESULT_VERSION, Result
+from .result import Result, check_header
 
 __all__ = [
     "read_fit4cad_segments",
@@ -369,11 +369,10 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
         raise InputError(f"{rpath}: malformed JSON ({exc.msg} at line {exc.lineno})") from None
     if not isinstance(data, dict):
         raise InputError(f"{rpath}: expected a JSON object, got {type(data).__name__}")
-    if data.get("format", "houghcad-result") != "houghcad-result":
-        raise InputError(f"{rpath}: not a houghcad result (format {data.get('format')!r})")
-    if not isinstance(data.get("version", 2), int) or data.get("version", 2) > RESULT_VERSION:
-        raise InputError(f"{rpath}: result format version {data.get('version')!r}; this houghcad reads "
-                         f"up to {RESULT_VERSION}")
+    try:  # the format before the keys: another tool's JSON is named as such
+        check_header(data)
+    except ValueError as exc:
+        raise InputError(f"{rpath}: {exc}") from None
     for key in ("n_points", "segments"):
         if key not in data:
             raise InputError(f"{rpath}: missing key {key!r}")

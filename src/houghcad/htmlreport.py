@@ -39,7 +39,7 @@ import numpy as np
 
 from .palette import (UNSEGMENTED_COLOR, group_color, hex_color, segment_colors, segment_edges, type_color,
                       types_present)
-from .render import _LIGHT, draw_sample, local_surface
+from .render import AMBIENT, LIGHT, draw_sample, local_surface
 from .report import group_sentence
 from .result import GROUP_KINDS, Result
 
@@ -164,7 +164,7 @@ def _payload(points: np.ndarray, result: Result, max_points: int, seg_rgb: np.nd
         # by its surface's turn from the light, so faces at different angles read apart.
         "normals": base64.b64encode(np.ascontiguousarray(
             np.rint(normals.T * 127.0), dtype=np.int8).tobytes()).decode("ascii"),
-        "light": [float(c) for c in _LIGHT],
+        "light": [float(c) for c in LIGHT], "ambient": AMBIENT,
     }
 
 

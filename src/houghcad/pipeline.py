@@ -319,8 +319,12 @@ class Segmenter(ParamsMixin):
                 "epsilon": self.epsilon, "normals_method": self.normals_method,
                 "persistence": self.persistence, "min_points": self.min_points, "seed": self.seed,
                 "merge": bool(self.merge), "association": dict(self.association or {}), "noise": self.noise,
-                "tolerances": self._tolerances().to_dict(), "skip": [self.skip] if isinstance(self.skip, str) else list(self.skip),
+                "tolerances": self._tolerances().to_dict(), "skip": self._skipped(),
                 "max_points": self.max_points, "full_resolution": bool(self.full_resolution)}
+
+    def _skipped(self) -> list[str]:
+        """The passes not to run, by name (one name alone is that one pass, not its letters)."""
+        return [self.skip] if isinstance(self.skip, str) else list(self.skip)
 
     def tolerances_dict(self) -> dict[str, Any]:
         """``tolerances`` as ``{stage: {name: value}}`` (without the ``association`` options)."""
@@ -365,7 +369,7 @@ class Segmenter(ParamsMixin):
         normals = None if normals is None else np.asarray(normals, dtype=np.float64)
         check_options(self)
         tol = self._tolerances()
-        skip = [self.skip] if isinstance(self.skip, str) else list(self.skip)
+        skip = self._skipped()
         unknown = sorted(set(skip) - set(pass_names()))
         if unknown:
             raise InputError(f"unknown pass {unknown[0]!r} to skip (passes: {', '.join(pass_names())})")

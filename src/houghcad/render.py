@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 __all__ = ["render_png", "draw_sample", "principal_frame", "local_surface", "splat", "splat_radius", "shaded",
-           "MAX_DRAWN_POINTS"]
+           "LIGHT", "AMBIENT", "MAX_DRAWN_POINTS"]
 
 #: Points drawn per view at most; more only slow drawing without a visible change.
 MAX_DRAWN_POINTS = 30_000
@@ -201,14 +201,17 @@ def splat_radius(spacing: float, half: float, size: int) -> int:
 
 #: Direction of the light in a view's basis (right, up, towards the viewer): from the viewer's
 #: upper left, so that faces at different angles get different brightness.
-_LIGHT = np.array([-0.25, 0.35, 1.0]) / np.linalg.norm([-0.25, 0.35, 1.0])
+LIGHT = np.array([-0.25, 0.35, 1.0]) / np.linalg.norm([-0.25, 0.35, 1.0])
+#: The share of its colour a point keeps facing away from the light: the colours stay those
+#: of the palette. The PNG views and the report's shader both shade with these two.
+AMBIENT = 0.55
 
 
-def shaded(colors: np.ndarray, normals: np.ndarray, ambient: float = 0.55) -> np.ndarray:
+def shaded(colors: np.ndarray, normals: np.ndarray, ambient: float = AMBIENT) -> np.ndarray:
     """``colors`` (N, 3) uint8 darkened by how far each point's surface turns from the light
     (Lambert's law on the unoriented ``normals`` (N, 3) in the view's basis), no darker than
     ``ambient`` of the colour: the shape reads in 3-D and the colours stay recognisable."""
-    f = ambient + (1.0 - ambient) * np.abs(normals @ _LIGHT)
+    f = ambient + (1.0 - ambient) * np.abs(normals @ LIGHT)
     return np.clip(np.rint(colors * f[:, None]), 0, 255).astype(np.uint8)
 
 

@@ -23,8 +23,23 @@ import numpy as np
 RESULT_VERSION = 2
 
 
-@dataclass
-class Segment:
+class _ByValue:
+    """Equality by value, as the JSON holds it (``to_dict``; NaN equal to NaN): the dataclasses'
+    generated ``==`` compared numpy arrays and raised. Unhashable, as a mutable dataclass is."""
+
+    def _compared(self) -> dict[str, Any]:
+        return self.to_dict()  # type: ignore[attr-defined]
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, type(self)):
+            return NotImplemented
+        return json.dumps(self._compared(), sort_keys=True) == json.dumps(other._compared(), sort_keys=True)
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(eq=False)
+class Segment(_ByValue):
     """One recognised primitive.
 
     Attributes
@@ -89,12 +104,6 @@ class Segment:
             d["parts"] = [p.to_dict() for p in self.parts]
         return d
 
-    def __eq__(self, other: object) -> bool:
-        """Same fields, arrays compared by value (the generated ``==`` raised on them)."""
-        return _same(self.to_dict(), other.to_dict()) if isinstance(other, Segment) else NotImplemented
-
-    __hash__ = None  # type: ignore[assignment]
-
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Segment":
         return cls(
@@ -109,8 +118,8 @@ class Segment:
         )
 
 
-@dataclass
-class Part:
+@dataclass(eq=False)
+class Part(_ByValue):
     """One connected piece of a maximal primitive, with its own fit.
 
     Attributes
@@ -138,12 +147,6 @@ class Part:
                 "params": _jsonable(self.params), "indices": [int(i) for i in self.indices],
                 "edge_indices": [int(i) for i in self.edges]}
 
-    def __eq__(self, other: object) -> bool:
-        """Same fields, arrays compared by value (the generated ``==`` raised on them)."""
-        return _same(self.to_dict(), other.to_dict()) if isinstance(other, Part) else NotImplemented
-
-    __hash__ = None  # type: ignore[assignment]
-
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Part":
         return cls(indices=_indices(d["indices"]), params=dict(d.get("params", {})),
@@ -160,8 +163,8 @@ def _union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 GROUP_KINDS = ("same_primitive", "translation", "rotation", "reflection", "coaxial", "parallel")
 
 
-@dataclass
-class Group:
+@dataclass(eq=False)
+class Group(_ByValue):
     """A relation between segments found by the association step (paper §5.4).
 
     Attributes
@@ -182,20 +185,14 @@ class Group:
         return {"kind": self.kind, "members": [int(m) for m in self.members],
                 "descriptors": _jsonable(self.descriptors)}
 
-    def __eq__(self, other: object) -> bool:
-        """Same fields, arrays compared by value (the generated ``==`` raised on them)."""
-        return _same(self.to_dict(), other.to_dict()) if isinstance(other, Group) else NotImplemented
-
-    __hash__ = None  # type: ignore[assignment]
-
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Group":
         return cls(kind=str(d["kind"]), members=[int(m) for m in d["members"]],
                    descriptors=dict(d.get("descriptors", {})))
 
 
-@dataclass
-class Result:
+@dataclass(eq=False)
+class Result(_ByValue):
     """Decomposition of a point cloud into primitives.
 
     Attributes
@@ -276,27 +273,18 @@ class Result:
             "groups": [g.to_dict() for g in self.groups],
         }
 
-    def __eq__(self, other: object) -> bool:
-        """Same points, segments (indices, parameters, errors, parts), groups and options, timing
-        aside: a result equals its JSON round trip, and a rerun's. (The generated ``==``
-        compared numpy arrays and raised.)"""
-        if not isinstance(other, Result):
-            return NotImplemented
-        a, b = self.to_dict(), other.to_dict()
-        a.pop("timing"), b.pop("timing")
-        return _same(a, b)
-
-    __hash__ = None  # type: ignore[assignment]  # mutable, as any dataclass with eq
+    def _compared(self) -> dict[str, Any]:
+        """Points, segments (indices, parameters, errors, parts), groups and options, timing
+        aside: a result equals its JSON round trip, and a rerun's."""
+        d = self.to_dict()
+        d.pop("timing")
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Result":
         """The result of :meth:`to_dict`'s dict ``d``; ValueError for another format or a newer
-        version than this houghcad writes (:data:`RESULT_VERSION`)."""
-        if d.get("format", "houghcad-result") != "houghcad-result":
-            raise ValueError(f"not a houghcad result (format {d.get('format')!r})")
-        version = d.get("version", RESULT_VERSION)
-        if isinstance(version, bool) or not isinstance(version, int) or version > RESULT_VERSION:
-            raise ValueError(f"result format version {version!r}; this houghcad reads up to {RESULT_VERSION}")
+        version than this houghcad writes (:func:`check_header`)."""
+        check_header(d)
         return cls(
             n_points=int(d["n_points"]),
             segments=[Segment.from_dict(s) for s in d["segments"]],
@@ -333,9 +321,14 @@ def _jsonable(x: Any) -> Any:
     return x
 
 
-def _same(a: dict[str, Any], b: dict[str, Any]) -> bool:
-    """Whether two ``to_dict`` dicts hold the same values (NaN equal to NaN, as in the JSON)."""
-    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+def check_header(d: dict[str, Any]) -> None:
+    """ValueError unless the JSON object ``d`` is a houghcad result (its ``format``) of a version
+    this houghcad reads (:data:`RESULT_VERSION` or older); both keys may be absent."""
+    if d.get("format", "houghcad-result") != "houghcad-result":
+        raise ValueError(f"not a houghcad result (format {d.get('format')!r})")
+    version = d.get("version", RESULT_VERSION)
+    if isinstance(version, bool) or not isinstance(version, int) or version > RESULT_VERSION:
+        raise ValueError(f"result format version {version!r}; this houghcad reads up to {RESULT_VERSION}")
 
 
 def _indices(values: Any) -> np.ndarray:

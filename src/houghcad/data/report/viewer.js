@@ -25,14 +25,16 @@
   gl.attachShader(prog, shader(gl.VERTEX_SHADER,
     "attribute float ax; attribute float ay; attribute float az; uniform mat4 mvp; uniform float size;" +
     "attribute float bx; attribute float by; attribute float bz; uniform mat3 rot; uniform vec3 light;" +
+    "uniform float ambient;" +
     "uniform float wsize; varying float shade;" +
     // A point is as wide as the points' spacing at its depth (wsize / w pixels), at least
     // `size` pixels: the surface closes and hides what lies behind it at any zoom. It is shaded
-    // by its unoriented normal against a light from the viewer's upper left, never below 55 %.
+    // by its unoriented normal against a light from the viewer's upper left, never below the
+    // ambient share of its colour (both from render.py, as the PNG views).
     "void main() { gl_Position = mvp * vec4(ax, ay, az, 1.0);" +
     " gl_PointSize = max(size, wsize / gl_Position.w);" +
     " vec3 m = rot * vec3(bx, by, bz); float l = length(m);" +
-    " shade = l > 0.0 ? 0.55 + 0.45 * abs(dot(m / l, light)) : 1.0; }"));
+    " shade = l > 0.0 ? ambient + (1.0 - ambient) * abs(dot(m / l, light)) : 1.0; }"));
   gl.attachShader(prog, shader(gl.FRAGMENT_SHADER,
     "precision mediump float; uniform vec3 color; varying float shade;" +
     "void main() { vec2 d = gl_PointCoord - 0.5; if (dot(d, d) > 0.25) discard;" +
@@ -52,6 +54,7 @@
   attributes(nrm, ["bx", "by", "bz"], gl.BYTE, true, 1);
   var uRot = gl.getUniformLocation(prog, "rot"), uLight = gl.getUniformLocation(prog, "light");
   gl.uniform3fv(uLight, D.light);
+  gl.uniform1f(gl.getUniformLocation(prog, "ambient"), D.ambient);
   var uMvp = gl.getUniformLocation(prog, "mvp"), uSize = gl.getUniformLocation(prog, "size"),
       uWsize = gl.getUniformLocation(prog, "wsize"),
       uColor = gl.getUniformLocation(prog, "color");
