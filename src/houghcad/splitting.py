@@ -233,8 +233,11 @@ def _recognised_ahead(seen: list[np.ndarray], families: list[Family], ctx: Conte
     if wait is None:
         return lambda k: None
     waited: list[dict[int, tuple]] = []
+    handed = set(todo)
 
     def result(k: int) -> tuple[list[Candidate], list[Candidate] | None] | None:
+        if k not in handed:  # the caller's own: it works on it while the workers take the rest
+            return None
         if not waited:
             done = wait()
             waited.append(dict(zip(todo, done)) if done is not None else {})
