@@ -9,6 +9,7 @@ minor errors ≤ 1% of the diagonal, axis / normal errors ≤ 1°, cone half-ang
 from __future__ import annotations
 
 import json
+import pickle
 
 import numpy as np
 import pytest
@@ -615,6 +616,15 @@ def test_segmenter_has_scikit_learns_estimator_api():
     assert seg.set_params(seed=5, min_points=10) is seg and (seg.seed, seg.min_points) == (5, 10)
     with pytest.raises(InputError, match="no parameter 'sed'"):
         seg.set_params(sed=1)
+
+
+def test_a_fitted_segmenter_pickles_and_reassociates_after(small_part):
+    """scikit-learn's convention: a fitted estimator can be saved (joblib, a process pool's
+    return value) and used after loading."""
+    seg = houghcad.Segmenter(seed=0).fit(small_part.points)
+    back = pickle.loads(pickle.dumps(seg))
+    assert back.result_ == seg.result_
+    assert back.reassociate(merge=False) == seg.reassociate(merge=False)
 
 
 def test_reassociate_leaves_the_fit_as_it_was_and_records_its_options(small_part):

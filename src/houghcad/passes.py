@@ -24,6 +24,11 @@ _PASSES_SPAN = 0.85
 _PASSES_END = 0.95
 
 
+def quiet(stage: str, fraction: float) -> None:
+    """Progress that reports nothing (module-level: a fitted Segmenter keeps its run, and a
+    lambda would not pickle)."""
+
+
 @dataclass(frozen=True)
 class Run:
     """What the passes read besides the state.
@@ -46,7 +51,7 @@ class Run:
     families: list[Family]
     voted: list[Family]
     associator: Associator
-    progress: Callable[[str, float], None] = lambda stage, fraction: None
+    progress: Callable[[str, float], None] = quiet
 
 
 PassFn = Callable[[Segmentation, Run], Segmentation]
@@ -113,7 +118,7 @@ def monotonic(progress: Callable[[str, float], None] | None) -> Callable[[str, f
     """``progress`` with fractions that never go back (passes after the
     splitting phase report below where its own progress reached)."""
     if progress is None:
-        return lambda stage, fraction: None
+        return quiet
     last = [0.0]
 
     def report(stage: str, fraction: float) -> None:

@@ -37,7 +37,7 @@ from .preprocess import preprocess, warn_coarse_float32
 from .recognize import recognize, refine
 from .result import Result
 from .splitting import splitting_phase
-from .passes import EXTENSION, PAPER_5_2, PAPER_5_3, PAPER_5_4, Pass, Run, Runner, TraceFn, monotonic
+from .passes import EXTENSION, PAPER_5_2, PAPER_5_3, PAPER_5_4, Pass, Run, Runner, TraceFn, monotonic, quiet
 from .state import SegmentRecord, Segmentation, checks_enabled
 from .tolerances import Tolerances
 
@@ -406,8 +406,9 @@ class Segmenter(ParamsMixin):
             seg = Segmentation(len(work))
             for p in PIPELINE:
                 if p is ASSOCIATION:
-                    self._before_association = _Saved(seg.copy(), replace(run, ctx=ctx), dict(runner.timing),
-                                                      points, normals, source, picked)
+                    # Without the workers and the progress closure: a fitted Segmenter pickles.
+                    self._before_association = _Saved(seg.copy(), replace(run, ctx=ctx, progress=quiet),
+                                                      dict(runner.timing), points, normals, source, picked)
                 seg = runner(p, seg)
         run = replace(run, ctx=ctx)  # the workers are gone
         self.context_ = ctx
