@@ -48,10 +48,19 @@ def test_round_trip_through_a_dict():
     ({"recognition.refit_points": -1}, "must be positive"),
     ({"scale.min_points_floor": 1}, "at least 2"),
     ({"fillets.extent_quantile": 1.5}, "at most 1"),
+    ({"recognition.keep_share": 7}, "at most 1"),  # a share above 1 left every point unsegmented
+    ({"scale.first_round_share": 1.01}, "at most 1"),
 ])
 def test_bad_tolerances_are_refused(bad, message):
     with pytest.raises(ValueError, match=message):
         Tolerances.from_dict(bad)
+
+
+def test_every_share_is_bounded_by_one():
+    for f in fields(Tolerances):
+        for g in fields(f.default_factory()):
+            if g.metadata["unit"].startswith("share"):
+                assert g.metadata["most"] == 1.0, f"{f.name}.{g.name}"
 
 
 def test_bad_tolerances_give_an_input_error(part):

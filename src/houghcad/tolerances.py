@@ -26,7 +26,10 @@ from typing import Any
 
 def tol(default: Any, unit: str, why: str, least: float | None = None, most: float | None = None) -> Any:
     """A tolerance field: its default, unit and one line saying why; ``least`` and ``most`` bound
-    the values a user may set (beyond positive, which every tolerance is)."""
+    the values a user may set (beyond positive, which every tolerance is). A share or a quantile
+    is at most 1 (``keep_share=7`` left every point unsegmented without a word)."""
+    if most is None and (unit.startswith("share") or unit == "quantile"):
+        most = 1.0
     return field(default=default, metadata={"unit": unit, "why": why, "least": least, "most": most})
 
 
