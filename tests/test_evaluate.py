@@ -14,6 +14,7 @@ from houghcad.evaluate import (
     MEASURES,
     classification_measures,
     evaluate_files,
+    in_file_rows,
     ground_truth_for,
     mfe_stats,
     read_fit4cad_parameters,
@@ -240,7 +241,8 @@ def test_ground_truth_for_bundled_demo_part():
 def _result_json(tmp_path: Path, segments: list[np.ndarray], n: int) -> Path:
     segs = [Segment(i, "plane", np.sort(s), {}, 0.01 * (i + 1)) for i, s in enumerate(segments)]
     p = tmp_path / "result.json"
-    p.write_text(Result(n, segs, _arr()).to_json())
+    rest = np.setdiff1d(np.arange(n), np.concatenate([_arr(), *segments])).astype(np.int64)
+    p.write_text(Result(n, segs, rest).to_json())
     return p
 
 
@@ -419,3 +421,28 @@ def test_a_result_of_another_cloud_is_scored_with_a_warning(tmp_path: Path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", InputWarning)
         evaluate_files(rj, tmp_path / "PC7_primitives.txt")
+
+
+def test_a_result_that_left_rows_out_is_scored_in_the_file_rows(tmp_path: Path):
+    # File rows 0-29; rows 2 and 5 held NaN and were left out (--drop-invalid): the run's
+    # 28 points are the file's other rows, in order. The truth numbers the file's rows.
+    P = np.random.default_rng(0).random((30, 3))
+    P[[2, 5]] = np.nan
+    np.savetxt(tmp_path / "PC7.xyz", P)
+    rows = np.setdiff1d(np.arange(30), [2, 5])
+    (tmp_path / "PC7_primitives.txt").write_text(
+        "".join(f"Primitive{j + 1}:=[{' '.join(str(r + 1) for r in part)}];\n"
+                for j, part in enumerate((rows[:14], rows[14:]))))
+    segs = [Segment(0, "plane", np.arange(14), {}, 0.01), Segment(1, "plane", np.arange(14, 28), {}, 0.01)]
+    options = {"input": {"rows": 30, "drop_invalid": True, "dropped_rows": [[2, 3], [5, 6]]}}
+    result = Result(28, segs, _arr(), options=options)
+    mapped = in_file_rows(result)
+    assert mapped.n_points == 30 and mapped.unsegmented.tolist() == [2, 5]
+    assert [s.indices.tolist() for s in mapped.segments] == [rows[:14].tolist(), rows[14:].tolist()]
+    (tmp_path / "result.json").write_text(result.to_json())
+    out = evaluate_files(tmp_path / "result.json", tmp_path / "PC7_primitives.txt")
+    assert out["measures"]["DSC"] == 1.0
+    options["input"]["dropped_rows"] = [[2, 3]]  # a record that does not fit the points
+    (tmp_path / "result.json").write_text(Result(28, segs, _arr(), options=options).to_json())
+    with pytest.raises(InputError, match="not a result of this cloud"):
+        evaluate_files(tmp_path / "result.json", tmp_path / "PC7_primitives.txt")

@@ -10,6 +10,7 @@ The classification measures follow the README's definitions; see :func:`classifi
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -340,6 +341,38 @@ def _warn_other_cloud(source: str | None, gt_file: Path, rpath: Path) -> None:
                       "scored as given", InputWarning, stacklevel=3)
 
 
+def _input(result: Result) -> dict[str, Any]:
+    """The result's record of which rows of its file it read (``options["input"]``)."""
+    inp = result.options.get("input")
+    return inp if isinstance(inp, dict) else {}
+
+
+def in_file_rows(result: Result) -> Result:
+    """``result`` with its points numbered as the rows of its input file, which a ground truth
+    numbers: a run that left rows out (``--drop-invalid``, an E57's flagged rows; recorded in
+    ``options["input"]["dropped_rows"]``) numbers its points without them. The rows left out
+    are unsegmented. ``result`` itself when it left none out; ValueError when the record does not
+    match the result's points."""
+    ranges = np.asarray(_input(result).get("dropped_rows") or [], dtype=np.int64).reshape(-1, 2)
+    if not len(ranges):
+        return result
+    total = result.n_points + int((ranges[:, 1] - ranges[:, 0]).sum())
+    if ranges.min() < 0 or ranges.max() > total or np.any(ranges[:, 1] < ranges[:, 0]):
+        raise ValueError("options.input.dropped_rows do not fit the result's points")
+    edge = np.zeros(total + 1, np.int64)  # +1 where a range starts, -1 where it stops
+    np.add.at(edge, ranges[:, 0], 1)
+    np.add.at(edge, ranges[:, 1], -1)
+    left_out = np.cumsum(edge)[:-1] > 0
+    rows = np.flatnonzero(~left_out)
+    if len(rows) != result.n_points:
+        raise ValueError("options.input.dropped_rows overlap")
+    segments = [replace(s, indices=rows[s.indices], edges=rows[s.edges],
+                        parts=[replace(p, indices=rows[p.indices], edges=rows[p.edges]) for p in s.parts])
+                for s in result.segments]
+    unsegmented = np.sort(np.concatenate([rows[result.unsegmented], np.flatnonzero(left_out)]))
+    return replace(result, n_points=total, segments=segments, unsegmented=unsegmented)
+
+
 def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
                    maximal: bool = False) -> dict[str, Any]:
     """Evaluate a saved :class:`Result` (JSON of ``Result.to_dict()``) against Fit4CAD ground truth.
@@ -385,13 +418,18 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
 
     if result.n_points < 0:
         raise InputError(f"{rpath}: n_points is negative ({result.n_points})")
+    try:
+        result = in_file_rows(result)
+    except ValueError as exc:
+        raise InputError(f"{rpath}: invalid result ({exc})") from None
     gt_file = ground_truth_for(ground_truth_path)
     gt = read_fit4cad_segments(gt_file)
     n = result.n_points
     _warn_other_cloud(result.source, gt_file, rpath)
     cloud = _cloud_beside(Path(ground_truth_path), gt_file)
     if cloud is not None:
-        m = len(read_points(cloud).points)
+        # Its rows, those the run left out included (the ground truth numbers them all).
+        m = read_points(cloud, drop_invalid=bool(_input(result).get("drop_invalid"))).provenance()["rows"]
         if m != n:
             raise InputError(f"{rpath}: the result has {n} points but the cloud {cloud.name} has {m}: "
                              "not a result of this cloud")

@@ -285,10 +285,24 @@ class Result(_ByValue):
         """The result of :meth:`to_dict`'s dict ``d``; ValueError for another format or a newer
         version than this houghcad writes (:func:`check_header`)."""
         check_header(d)
+        n, segs = d["n_points"], d["segments"]
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise ValueError(f"n_points must be a whole number of points, got {n!r}")
+        if not isinstance(segs, list):
+            raise ValueError(f"segments must be a list, got {type(segs).__name__}")
+        segments = [Segment.from_dict(s) for s in segs]
+        given = "unsegmented" in d
+        unsegmented = _indices(d.get("unsegmented", []))
+        if not given:  # another writer may leave it out: the points no segment holds
+            held = np.zeros(n, bool)
+            for s in segments:
+                held[s.indices[(s.indices >= 0) & (s.indices < n)]] = True
+            unsegmented = np.flatnonzero(~held).astype(np.int64)
+        _check_partition(n, segments, unsegmented)
         return cls(
-            n_points=int(d["n_points"]),
-            segments=[Segment.from_dict(s) for s in d["segments"]],
-            unsegmented=_indices(d.get("unsegmented", [])),
+            n_points=n,
+            segments=segments,
+            unsegmented=unsegmented,
             timing=dict(d.get("timing", {})),
             options=dict(d.get("options", {})),
             source=d.get("source"),
@@ -329,6 +343,20 @@ def check_header(d: dict[str, Any]) -> None:
     version = d.get("version", RESULT_VERSION)
     if isinstance(version, bool) or not isinstance(version, int) or version > RESULT_VERSION:
         raise ValueError(f"result format version {version!r}; this houghcad reads up to {RESULT_VERSION}")
+
+
+def _check_partition(n: int, segments: list[Segment], unsegmented: np.ndarray) -> None:
+    """ValueError unless every index is one of the n points (-1 labelled the last point) and each
+    segment's parts hold its points (the faces that are scored). A point may be in two segments:
+    a ground truth's faces share their boundary points, and scores it against itself as 1."""
+    for idx in [s.indices for s in segments] + [s.edges for s in segments] + [unsegmented]:
+        bad = idx[(idx < 0) | (idx >= n)]
+        if len(bad):
+            raise ValueError(f"point index {int(bad[0])} out of range for the result's {n} points")
+    for s in segments:
+        if s.parts and not np.array_equal(np.unique(np.concatenate([p.indices for p in s.parts])),
+                                          np.unique(s.indices)):
+            raise ValueError(f"segment {s.id}: its parts do not hold its points")
 
 
 def _indices(values: Any) -> np.ndarray:
