@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pickle
 import re
 import textwrap
 from dataclasses import replace
@@ -17,7 +18,7 @@ import houghcad
 from houghcad import cli, synth
 from houghcad.errors import InputError
 from houghcad.families import REGISTRY, Placement, select, unregister_family
-from houghcad.families.parametric import linear_params_sympy
+from houghcad.families.parametric import UserFamilyError, linear_params_sympy
 from houghcad.hough import accumulate
 from houghcad.pipeline import Segmenter
 from houghcad.preprocess import Similarity, preprocess
@@ -260,6 +261,12 @@ def test_user_family_is_selectable_by_name_and_unknown_names_still_error(familie
     ({"search": "global"}, "search must be one of"),
     ({"valid": 3}, "valid must be a function"),
     ({"precedence": "high"}, "precedence must be a whole number"),
+    ({"samples": (0, 0)}, r"samples must be two whole numbers \(n_u, n_v\), each at least 1, got \(0, 0\)"),
+    ({"samples": (2.5, 3)}, r"samples must be two whole numbers.*got \(2.5, 3\)"),
+    ({"samples": 8}, "samples must be two whole numbers"),
+    ({"params": [k, h, a]}, r"parameters \['a'\] appear in no equation"),
+    ({"z": k * u**2 + 0 * h}, r"parameters \['h'\] appear in no equation"),
+    ({"x": sp.Function("f")(v) * u}, "cannot evaluate the equations with numpy"),
 ])
 def test_bad_definitions_give_clear_errors(families, kwargs, message):
     spec = dict(name="bad_family", x=u * sp.cos(v), y=u * sp.sin(v), z=k * u**2 + h, params=[k, h], u_range=None,
@@ -268,6 +275,87 @@ def test_bad_definitions_give_clear_errors(families, kwargs, message):
     with pytest.raises(InputError, match=message):
         families(spec.pop("name"), **spec)
     assert "cylinder" in REGISTRY and REGISTRY["cylinder"].name == "cylinder"
+
+
+def test_three_solved_parameters_need_a_lattice_of_quads(families):
+    """With three solved parameters the vote splits the quads of the (u, v) lattice: one node
+    along a coordinate makes none, and the family would never be found."""
+    with pytest.raises(InputError, match="each at least 2 with three solved parameters, got \\(1, 16\\)"):
+        families("thin_lattice", x=a * sp.cos(u) * sp.cos(v), y=b * sp.sin(u) * sp.cos(v), z=c * sp.sin(v),
+                 params=[a, b, c], u_range=(0, 2 * sp.pi), v_range=(-sp.pi / 2, sp.pi / 2), samples=(1, 16))
+    fam = families("fine_lattice", x=a * sp.cos(u) * sp.cos(v), y=b * sp.sin(u) * sp.cos(v), z=c * sp.sin(v),
+                   params=[a, b, c], u_range=(0, 2 * sp.pi), v_range=(-sp.pi / 2, sp.pi / 2),
+                   samples=(np.int64(2), 24))
+    assert fam.samples == (2, 24) and all(type(n) is int for n in fam.samples)
+
+
+def _callables(**over):
+    """Callable equations of an elliptic cylinder (a, b the semi-axes), some replaced."""
+    funcs = {"x": lambda u, v, a, b: a * np.cos(v), "y": lambda u, v, a, b: b * np.sin(v),
+             "z": lambda u, v, a, b: u}
+    funcs.update(over)
+    return dict(funcs, params=["a", "b"], u_range=None, v_range=(0, 2 * np.pi))
+
+
+@pytest.mark.parametrize("over, message", [
+    ({"x": lambda u, v, a, b: np.array([1.0])},
+     r"family 'bad_callable': its x\(\.\.\.\) returned shape \(1,\) for arguments of shape \(64,\)"),
+    ({"y": lambda u, v, a, b: 1 / 0}, r"its y\(\.\.\.\) raised ZeroDivisionError: division by zero"),
+    ({"z": lambda u, v, a, b: "u"}, r"its z\(\.\.\.\) returned 'u' \(type str\), not numbers"),
+    ({"x": lambda u, v, a, b: np.cos(v)}, r"parameters \['a'\] appear in no equation"),
+])
+def test_bad_callables_are_refused_when_defined(families, over, message):
+    """Callable equations are probed at definition: one that raises, answers in another shape
+    (broadcast, an array of one value would be a constant coordinate) or ignores a parameter
+    is refused then, not left to make the family silently never found."""
+    with pytest.raises(InputError, match=message):
+        families("bad_callable", **_callables(**over))
+    assert "bad_callable" not in REGISTRY
+    # One number is a constant coordinate, not a wrong shape.
+    fam = families("flat_callable", **_callables(z=lambda u, v, a, b: 0.5))
+    assert fam.eq.X(np.zeros(4), np.zeros(4), np.ones((4, 2)))[:, 2].tolist() == [0.5] * 4
+
+
+def test_a_function_failing_in_a_run_is_one_error_naming_it(families):
+    """valid and placement run only on clusters: what they raise or return that cannot be used
+    stops the run with a UserFamilyError (an InputError) naming the family and the function;
+    the error pickles (it comes back from the worker processes)."""
+    good = (np.eye(3), np.zeros(3))
+    rng = np.random.default_rng(0)
+    P = rng.normal(size=(50, 3))
+    N = P / np.linalg.norm(P, axis=1, keepdims=True)
+    cases = [
+        (lambda P, N: 1 / 0, r"its placement\(\.\.\.\) raised ZeroDivisionError"),
+        (lambda P, N: 5, r"its placement\(\.\.\.\) returned 5 \(type int\), not \(R, origin\)"),
+        (lambda P, N: (np.eye(2), np.zeros(3)),
+         r"its placement\(\.\.\.\) returned R and origin of shapes \(2, 2\) and \(3,\): \(3, 3\) and \(3,\) "
+         "needed"),
+        (lambda P, N: (2 * np.eye(3), np.zeros(3)),
+         r"its placement\(\.\.\.\) returned an R whose rows are not orthonormal"),
+        (lambda P, N: [np.eye(3)],
+         r"its placement\(\.\.\.\) returned an array of shape \(3, 3\) where a pair \(R, origin\) belongs"),
+    ]
+    for placement, message in cases:
+        fam = families("odd_frames", **_callables(), placement=placement)
+        with pytest.raises(UserFamilyError, match="family 'odd_frames': " + message) as err:
+            fam.placements(P, N, None)
+        back = pickle.loads(pickle.dumps(err.value))
+        assert type(back) is UserFamilyError and str(back) == str(err.value) and "\n" not in str(back)
+    # One pair, a list of pairs, a tuple of pairs (read as a pair before), no frame at all.
+    for placement, n in [(lambda P, N: good, 1), (lambda P, N: [good, good], 2), (lambda P, N: (good, good), 2),
+                         (lambda P, N: [], 0)]:
+        assert len(families("odd_frames", **_callables(), placement=placement).placements(P, N, None)) == n
+    fam = families("odd_valid", **_callables(), valid=lambda p: p["zz"] > 0)
+    prim = fam.primitive(np.array([0.5, 0.3]), Placement(*good))
+    with pytest.raises(UserFamilyError, match=r"^family 'odd_valid': its valid\(\.\.\.\) raised KeyError: 'zz'$"):
+        fam.valid(prim, None)
+    for returned, message in [(None, r"returned None \(type NoneType\)"),
+                              (np.array([True, False]), r"returned an array of shape \(2,\)")]:
+        fam.user_valid = lambda p, r=returned: r
+        with pytest.raises(UserFamilyError, match=message + ", not True or False"):
+            fam.valid(prim, None)
+    fam.user_valid = lambda p: p["a"] > p["b"]
+    assert fam.valid(prim, None) is True
 
 
 def test_search_and_precedence_are_declared_like_a_family_file(families):
@@ -355,3 +443,58 @@ def test_cli_unknown_family_after_loading_the_file_errors_before_reading(tmp_pat
         unregister_family("cli_paraboloid")
     err = capsys.readouterr().err
     assert code == 2 and "unknown family 'cli_parabola'" in err and "cli_paraboloid" in err
+
+
+BAD_RUN_FILE = textwrap.dedent('''
+    import sympy as sp
+    import houghcad
+
+    u, v, a, b = sp.symbols("u v a b")
+    houghcad.define_family("ecyl_bad", x=a * sp.cos(v), y=b * sp.sin(v), z=u, params=[a, b], u_range=None,
+                           v_range=(0, 2 * sp.pi), {option})
+''')
+
+
+@pytest.fixture(scope="module")
+def elliptic_cylinder(tmp_path_factory) -> Path:
+    rng = np.random.default_rng(5)
+    pts, _ = synth.sample_parametric(lambda u, v: 0.6 * np.cos(v), lambda u, v: 0.35 * np.sin(v), lambda u, v: u,
+                                     (0, 2.0), (0, 2 * np.pi), 1500, rng)
+    path = tmp_path_factory.mktemp("ecyl") / "ellcyl.xyz"
+    np.savetxt(path, pts)
+    return path
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+@pytest.mark.parametrize("option, message", [
+    ('placement="extrusion", valid=lambda p: p["zz"] > 0', "its valid(...) raised KeyError: 'zz'"),
+    ("placement=lambda P, N: 5", "its placement(...) returned 5 (type int), not (R, origin)"),
+])
+def test_cli_family_failing_in_the_run_is_a_one_line_error(tmp_path, capfd, elliptic_cylinder, jobs, option,
+                                                           message):
+    """In this process or in the forked workers, a family function that fails mid-run ends the
+    command with one line and exit code 2 (capfd: the workers' output is seen too)."""
+    fams = tmp_path / "fams.py"
+    fams.write_text(BAD_RUN_FILE.format(option=option))
+    out = tmp_path / "o.json"
+    try:
+        code = cli.main(["segment", str(elliptic_cylinder), "-o", str(out), "--family-file", str(fams),
+                         "--families", "plane,ecyl_bad", "--jobs", jobs])
+    finally:
+        unregister_family("ecyl_bad")
+    err = capfd.readouterr().err
+    assert code == 2, err
+    assert err.startswith(f"houghcad: error: family 'ecyl_bad': {message}")
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_batch_row_of_a_family_failing_in_the_run_has_the_same_line(tmp_path, elliptic_cylinder):
+    from houghcad.batch import CloudJob, SegmentOptions, segment_cloud
+
+    fams = tmp_path / "fams.py"
+    fams.write_text(BAD_RUN_FILE.format(option='placement="extrusion", valid=lambda p: p["zz"] > 0'))
+    options = SegmentOptions(families="plane,ecyl_bad", family_files=(str(fams),))
+    row = segment_cloud(CloudJob(str(elliptic_cylinder), "ellcyl.xyz", str(tmp_path), "ellcyl", ("json",), options))
+    assert (row.status, row.error) == ("error", "family 'ecyl_bad': its valid(...) raised KeyError: 'zz'")
+    assert "ecyl_bad" not in REGISTRY

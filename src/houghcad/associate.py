@@ -37,6 +37,7 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from .errors import InputError
 from .families.base import Family, Frame, Primitive, regular_indices, unit
 from .adjacency import SegmentGraph
 from .bridges import ROW_PERCENTILES, ROW_POINTS, bridged, sampling_gaps
@@ -266,6 +267,8 @@ class Associator:
         sel = idx[regular_indices(len(idx), self.tol.refit_points)]
         try:
             out = fam.fit(prim, self._pre.points[sel], self._pre.normals[sel])
+        except InputError:  # a user family's function failing: bad input, not a failed fit
+            raise
         except (np.linalg.LinAlgError, ValueError):
             out = None
         return out if out is not None else prim

@@ -43,9 +43,17 @@ cloud's scale. A coordinate range given as ``None`` makes u or v a free length
 coordinate (e.g. ``z = v`` for an extrusion, ``x = u cos v`` for a profile of
 revolution), swept over the segment's extent.
 
+Errors: a definition that cannot work (a parameter in no equation, a callable
+that raises or answers in the wrong shape when probed...) is refused by
+:func:`define_family` with an :class:`~houghcad.errors.InputError`. During a
+run, a function of the family (an equation, the placement, ``valid``) that
+raises or returns something unusable stops it with a :class:`UserFamilyError`
+naming the family and the function (:mod:`.guard`).
+
 Modules: :mod:`.equations` (evaluation, linear parameters), :mod:`.placement`
 (standard forms), :mod:`.vote` (Γ_P sampling), :mod:`.family`
-(:class:`ParametricFamily`); this one declares families (:func:`define_family`).
+(:class:`ParametricFamily`), :mod:`.guard` (calls into the user's code); this
+one declares families (:func:`define_family`).
 """
 
 from __future__ import annotations
@@ -58,12 +66,14 @@ import numpy as np
 from ...errors import InputError
 from ..base import REGISTRY, SEARCHES, SELECTION_WORDS, add
 from .equations import (CallableEquations, Equations, SympyEquations, linear_params_numeric, linear_params_sympy,
-                        solvable_subset)
+                        solvable_subset, unused_params)
 from .family import LENGTH_SPAN, ParametricFamily
+from .guard import UserFamilyError
 from .placement import PLACEMENTS, place
 
-__all__ = ["LENGTH_SPAN", "PLACEMENTS", "ParametricFamily", "define_family", "linear_params_numeric",
-           "linear_params_sympy", "place", "solvable_subset", "unregister_family", "user_families"]
+__all__ = ["LENGTH_SPAN", "PLACEMENTS", "ParametricFamily", "UserFamilyError", "define_family",
+           "linear_params_numeric", "linear_params_sympy", "place", "solvable_subset", "unregister_family",
+           "user_families"]
 
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 _USER: set[str] = set()
@@ -123,10 +133,10 @@ def define_family(name: str, x, y, z, params: Sequence, u_range, v_range, *, lin
         ``f(P, N) -> (R, origin)`` (or a list of such pairs) in the cloud's
         standard frame, R's rows the local axes.
     samples : (n_u, n_v), optional
-        (u, v) samples per point in the vote: the starting lattice refined
-        adaptively when three parameters are solved (default 16 × 16), the
-        Newton starts otherwise (default 10 × 10 with two solved, 4 × 4 with
-        one).
+        (u, v) samples per point in the vote, whole numbers: the starting
+        lattice refined adaptively when three parameters are solved (default
+        16 × 16, at least 2 × 2), the Newton starts otherwise (default 10 × 10
+        with two solved, 4 × 4 with one; at least 1 × 1).
     valid : callable, optional
         ``valid({param: value}) -> bool`` on standard-frame values; rejects
         degenerate shapes a simpler family covers.
@@ -194,6 +204,11 @@ def _compile(name: str, funcs: tuple, names: list[str], ur: tuple[float, float] 
     rng = np.random.default_rng(0)
     spans = [(-1.0, 1.0) if r is None else r for r in (ur, vr)]
     eq, detected = _equations(name, funcs, names, spans, rng)
+    # Its own generator: this check leaves the linear parameters' probes as they were.
+    unused = unused_params(eq, *spans, np.random.default_rng(1))
+    if unused:
+        raise InputError(f"{name}: parameters {[names[i] for i in unused]} appear in no equation (the surface "
+                         "does not change with them): they cannot be estimated")
     if linear is not None:
         detected = _declared_linear(name, linear, names, detected)
     solved = solvable_subset(eq, detected, *spans, rng) if detected else []
@@ -202,15 +217,14 @@ def _compile(name: str, funcs: tuple, names: list[str], ur: tuple[float, float] 
 
 def _equations(name: str, funcs: tuple, names: list[str], spans: list[tuple[float, float]],
                rng: np.random.Generator) -> tuple[Equations, list[int]]:
-    """Callable or sympy equations, and the indices of the parameters they are linear in."""
+    """Callable or sympy equations, and the indices of the parameters they are linear in.
+
+    The callables run here first: one that raises or answers in the wrong shape is reported now
+    (a :class:`UserFamilyError`), not in the middle of a run."""
     x, y, z = funcs
     if all(callable(f) for f in funcs) and not any(hasattr(f, "free_symbols") for f in funcs):
-        eq: Equations = CallableEquations(x, y, z, names)
-        try:
-            detected = linear_params_numeric(eq, *spans, rng)
-        except Exception as exc:
-            raise InputError(f"{name}: evaluating the callables failed ({type(exc).__name__}: {exc})") from None
-        return eq, detected
+        eq: Equations = CallableEquations(x, y, z, names, family=name)
+        return eq, linear_params_numeric(eq, *spans, rng)
     import sympy as sp
 
     syms = [sp.Symbol(n) for n in names]
@@ -225,7 +239,12 @@ def _equations(name: str, funcs: tuple, names: list[str], spans: list[tuple[floa
     if extra:
         raise InputError(f"{name}: unknown symbols {sorted(map(str, extra))} in the equations "
                          f"(coordinates are u and v; parameters {names})")
-    return SympyEquations(exprs, su, sv, syms), linear_params_sympy(exprs, syms)
+    try:
+        eq = SympyEquations(exprs, su, sv, syms, family=name)
+    except Exception as exc:  # lambdify: e.g. an undefined function, which numpy cannot evaluate
+        raise InputError(f"{name}: cannot evaluate the equations with numpy ({type(exc).__name__}: "
+                         f"{' '.join(str(exc).split())})") from None
+    return eq, linear_params_sympy(exprs, syms)
 
 
 def _declared_linear(name: str, linear: Sequence[str], names: list[str], detected: list[int]) -> list[int]:
@@ -270,15 +289,32 @@ def _vote_bounds(name: str, bounds: Mapping[str, tuple[float, float]] | None,
 
 def _checked_vote_setup(name: str, placement: str | Callable, samples: tuple[int, int] | None,
                         solved: list[int]) -> tuple[int, int] | None:
-    """``samples`` as ints, after checking the placement and that some parameter is solved."""
+    """``samples`` as ints, after checking the placement, the samples and that some parameter is solved."""
     if not callable(placement) and placement not in PLACEMENTS:
         raise InputError(f"{name}: unknown placement {placement!r} (known: {', '.join(PLACEMENTS)}, or a callable)")
     if samples is not None:
-        samples = (int(samples[0]), int(samples[1]))
+        samples = _checked_samples(name, samples, solved)
     if not solved:
         raise InputError(f"{name}: no parameter enters the equations linearly (or none is solvable): the Hough "
                          "transform is sampled by solving for linear parameters")
     return samples
+
+
+def _checked_samples(name: str, samples, solved: list[int]) -> tuple[int, int]:
+    """``samples`` as two ints, each at least 1, or 2 with three solved parameters (the lattice's
+    quads are split: one node along a coordinate makes none). Zero samples vote nothing, and a
+    fraction would be truncated."""
+    least = 2 if len(solved) == 3 else 1
+    try:
+        pair = tuple(samples)
+    except TypeError:
+        pair = ()
+    whole = len(pair) == 2 and all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in pair)
+    if not whole or min(pair) < least:
+        why = " with three solved parameters" if least == 2 else ""
+        raise InputError(f"{name}: samples must be two whole numbers (n_u, n_v), each at least {least}{why}, "
+                         f"got {samples!r}")
+    return int(pair[0]), int(pair[1])
 
 
 def _set_search(fam: ParametricFamily, search: str, precedence: int) -> None:

@@ -8,6 +8,8 @@ from typing import Sequence
 
 import numpy as np
 
+from .guard import describe, user_code, user_error
+
 
 class Equations:
     """x(u, v; a) on numpy arrays, with derivatives.
@@ -33,10 +35,14 @@ def _stack(values, shape) -> np.ndarray:
 
 
 class SympyEquations(Equations):
-    def __init__(self, exprs, u, v, syms):
+    """Lambdified sympy expressions (``family`` names them in errors: an undefined function in
+    an expression only fails when evaluated)."""
+
+    def __init__(self, exprs, u, v, syms, family: str = "unnamed"):
         import sympy as sp
 
         super().__init__(len(syms))
+        self._family = family
         args = [u, v, *syms]
         self._f = sp.lambdify(args, list(exprs), "numpy")
         self._d = {}
@@ -46,32 +52,56 @@ class SympyEquations(Equations):
     def X(self, u, v, a):
         u, v, a = np.asarray(u, float), np.asarray(v, float), np.asarray(a, float)
         shape = np.broadcast_shapes(u.shape, v.shape, a.shape[:-1])
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), user_code(self._family, "equations"):
             return _stack(self._f(u, v, *np.moveaxis(a, -1, 0)), shape)
 
     def jac(self, u, v, a, wrt):
         u, v, a = np.asarray(u, float), np.asarray(v, float), np.asarray(a, float)
         shape = np.broadcast_shapes(u.shape, v.shape, a.shape[:-1])
         cols = np.moveaxis(a, -1, 0)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), user_code(self._family, "equations"):
             return np.stack([_stack(self._d[w](u, v, *cols), shape) for w in wrt], axis=-1)
+
+
+def _full(x: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    return x if x.shape == shape else np.broadcast_to(x, shape)
 
 
 class CallableEquations(Equations):
     """Callables ``f(u, v, **params)``; derivatives by central differences
-    (exact up to rounding for the linear parameters)."""
+    (exact up to rounding for the linear parameters). ``family`` names them in errors."""
 
-    def __init__(self, fx, fy, fz, names):
+    def __init__(self, fx, fy, fz, names, family: str = "unnamed"):
         super().__init__(len(names))
         self._fs = (fx, fy, fz)
         self._names = tuple(names)
+        self._family = family
 
     def X(self, u, v, a):
         u, v, a = np.asarray(u, float), np.asarray(v, float), np.asarray(a, float)
         shape = np.broadcast_shapes(u.shape, v.shape, a.shape[:-1])
-        kw = {n: a[..., i] for i, n in enumerate(self._names)}
+        # Every argument in the full shape: a vectorised function then answers in that shape.
+        u, v = _full(u, shape), _full(v, shape)
+        kw = {n: _full(a[..., i], shape) for i, n in enumerate(self._names)}
         with np.errstate(all="ignore"):
-            return _stack([f(u, v, **kw) for f in self._fs], shape)
+            return _stack([self._coordinate(w, f, u, v, kw, shape) for w, f in zip("xyz", self._fs)], shape)
+
+    def _coordinate(self, which: str, f, u: np.ndarray, v: np.ndarray, kw: dict[str, np.ndarray],
+                    shape: tuple[int, ...]) -> np.ndarray:
+        """The values of the user's function ``f`` for coordinate ``which``, checked: an array in
+        the arguments' shape, or one number (a constant coordinate). Anything else would be
+        broadcast into another surface (an array of one value: a constant) or fail later."""
+        what = f"{which}(...)"
+        with user_code(self._family, what):
+            got = f(u, v, **kw)
+        try:
+            out = np.asarray(got, float)
+        except (TypeError, ValueError):
+            raise user_error(self._family, what, f"returned {describe(got)}, not numbers") from None
+        if out.ndim and out.shape != shape:
+            raise user_error(self._family, what, f"returned shape {out.shape} for arguments of shape {shape} "
+                             "(a vectorised function answers in its arguments' shape, or with one number)")
+        return out
 
     def jac(self, u, v, a, wrt):
         u, v, a = np.asarray(u, float), np.asarray(v, float), np.asarray(a, float)
@@ -156,6 +186,26 @@ def linear_params_numeric(eq: Equations, u_span, v_span, rng: np.random.Generato
     for i in lin:
         if all(zero(eq.X(u, v, a + s * E[i] + t * E[j]) - eq.X(u, v, a + s * E[i]) - eq.X(u, v, a + t * E[j]) + base)
                for j in out):
+            out.append(i)
+    return out
+
+
+def unused_params(eq: Equations, u_span, v_span, rng: np.random.Generator, n: int = 64) -> list[int]:
+    """Parameters the equations do not depend on: moving one alone changes no coordinate (to
+    rounding) at any of ``n`` random samples where they are finite. No such sample proves
+    nothing: none is reported then."""
+    k = eq.k
+    u = rng.uniform(*u_span, n)
+    v = rng.uniform(*v_span, n)
+    a = rng.uniform(0.3, 1.5, (n, k)) * rng.choice([-1.0, 1.0], (n, k))
+    t = rng.uniform(0.5, 2.0, n)[:, None]
+    base = eq.X(u, v, a)
+    scale = 1.0 + np.nanmax(np.abs(base), initial=0.0)
+    out = []
+    for i, e in enumerate(np.eye(k)):
+        d = eq.X(u, v, a + t * e) - base
+        d = d[np.isfinite(d).all(axis=-1)]
+        if len(d) and float(np.abs(d).max()) <= 1e-12 * scale:
             out.append(i)
     return out
 

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from ...hough import Grid
 from ..base import Family, Frame, Primitive, gauss_newton, unit
 from .equations import Equations
+from .guard import describe, user_code, user_error
 from .placement import place
 from .vote import GammaSampling, periodic
 
@@ -90,7 +91,7 @@ class ParametricFamily(GammaSampling, Family):
 
     # --- standard form and voting ------------------------------------------------
     def placements(self, P, N, ctx):
-        return place(self.placement, P, N)
+        return place(self.placement, P, N, family=self.name)
 
     def _scale(self, L: float) -> np.ndarray:
         return np.power(max(L, 1e-9), self.dims)
@@ -261,7 +262,16 @@ class ParametricFamily(GammaSampling, Family):
         a = np.asarray(prim.params["values"], float)
         if not np.isfinite(a).all():
             return False
-        return True if self.user_valid is None else bool(self.user_valid(dict(zip(self.names, a.tolist()))))
+        if self.user_valid is None:
+            return True
+        with user_code(self.name, "valid(...)"):
+            ok = self.user_valid(dict(zip(self.names, a.tolist())))
+        # None (a forgotten return) would reject every shape; an array fails in bool() or
+        # (one element) hides a mistake.
+        if ok is None or isinstance(ok, (list, tuple)) or (isinstance(ok, np.ndarray) and ok.ndim > 0):
+            raise user_error(self.name, "valid(...)", f"returned {describe(ok)}, not True or False")
+        with user_code(self.name, "valid(...)"):
+            return bool(ok)
 
     # --- output ----------------------------------------------------------------------
     def to_world(self, prim, T):

@@ -9,9 +9,12 @@ from ...errors import InputError
 from ...preprocess import rotation_to_z
 from ..base import Placement, axis_from_normal_lines, lines_intersection, unit
 from ..cone import cone_frame
+from .guard import describe, user_code, user_error
 
 #: Standard-form estimators a family can be placed with (or a callable, see :func:`define_family`).
 PLACEMENTS = ("none", "plane", "axis", "extrusion", "centre", "apex")
+#: Largest deviation of R Rᵀ from the identity in a user placement (float32 axes pass).
+ROTATION_TOL = 1e-5
 
 
 def _x_axis(P: np.ndarray, origin: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -38,7 +41,43 @@ def _frame(P: np.ndarray, origin: np.ndarray, z: np.ndarray) -> Placement:
     return Placement(R, np.asarray(origin, float))
 
 
-def place(mode, P: np.ndarray, N: np.ndarray) -> list[Placement]:
+def _array(x) -> np.ndarray | None:
+    """``x`` as a float array, None if it is not numbers."""
+    try:
+        return np.asarray(x, float)
+    except (TypeError, ValueError):
+        return None
+
+
+def _user_frames(fn, P: np.ndarray, N: np.ndarray, family: str) -> list[Placement]:
+    """The frames of a placement callable, checked: (R, origin) or a list of such pairs, R a
+    3 × 3 rotation (its rows the local axes), origin a point (3,). A wrong answer would
+    otherwise fail deep in the vote, or put every cluster in a frame no surface fits."""
+    what = "placement(...)"
+    with user_code(family, what):
+        got = fn(P, N)
+    want = "not (R, origin) or a list of such pairs"
+    single = isinstance(got, (tuple, list)) and len(got) == 2 and getattr(_array(got[0]), "ndim", 0) == 2
+    try:
+        pairs = [got] if single else list(got)
+    except TypeError:
+        raise user_error(family, what, f"returned {describe(got)}, {want}") from None
+    out = []
+    for pair in pairs:
+        if not (isinstance(pair, (tuple, list)) and len(pair) == 2):
+            raise user_error(family, what, f"returned {describe(pair)} where a pair (R, origin) belongs")
+        R, o = _array(pair[0]), _array(pair[1])
+        if R is None or o is None or R.shape != (3, 3) or o.shape != (3,):
+            shapes = [None if x is None else x.shape for x in (R, o)]
+            raise user_error(family, what, f"returned R and origin of shapes {shapes[0]} and {shapes[1]}: "
+                             "(3, 3) and (3,) needed")
+        if np.isfinite(R).all() and not np.allclose(R @ R.T, np.eye(3), atol=ROTATION_TOL):
+            raise user_error(family, what, "returned an R whose rows are not orthonormal (they are the local axes)")
+        out.append(Placement(R, o))
+    return out
+
+
+def place(mode, P: np.ndarray, N: np.ndarray, family: str = "unnamed") -> list[Placement]:
     """Standard-form frames of a cluster (points P, normals N: (n, 3)).
 
     - ``"none"``: the cloud's own standard frame;
@@ -50,14 +89,13 @@ def place(mode, P: np.ndarray, N: np.ndarray) -> list[Placement]:
     - ``"centre"``: origin where the normal lines meet, axes the principal
       axes of the points around it (x the widest);
     - ``"apex"``: origin where the tangent planes meet, z the cone axis;
-    - a callable ``(P, N) -> (R, origin)`` or a list of them: the user's.
+    - a callable ``(P, N) -> (R, origin)`` or a list of them: the user's
+      (checked; ``family`` names it in errors).
     x is always the principal direction of the points across z.
     """
     m = P.mean(axis=0)
     if callable(mode):
-        got = mode(P, N)
-        got = [got] if isinstance(got, tuple) and len(got) == 2 and np.ndim(got[0]) == 2 else list(got)
-        return [Placement(np.asarray(R, float), np.asarray(o, float)) for R, o in got]
+        return _user_frames(mode, P, N, family)
     if mode == "none":
         return [Placement(np.eye(3), np.zeros(3))]
     if mode == "plane":
