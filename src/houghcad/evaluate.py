@@ -373,6 +373,31 @@ def in_file_rows(result: Result) -> Result:
     return replace(result, n_points=total, segments=segments, unsegmented=unsegmented)
 
 
+def _read_result(rpath: Path) -> Result:
+    """The result saved at ``rpath``, checked (:meth:`Result.from_dict`) and in its file's rows
+    (:func:`in_file_rows`); InputError naming the file otherwise."""
+    text = read_text(rpath)
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{rpath}: malformed JSON ({exc.msg} at line {exc.lineno})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{rpath}: expected a JSON object, got {type(data).__name__}")
+    try:  # the format before the keys: another tool's JSON is named as such
+        check_header(data)
+    except ValueError as exc:
+        raise InputError(f"{rpath}: {exc}") from None
+    for key in ("n_points", "segments"):
+        if key not in data:
+            raise InputError(f"{rpath}: missing key {key!r}")
+    try:
+        return in_file_rows(Result.from_dict(data))
+    except KeyError as exc:
+        raise InputError(f"{rpath}: a segment lacks key {exc.args[0]!r}") from None
+    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: an index past int64
+        raise InputError(f"{rpath}: invalid result ({exc})") from None
+
+
 def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
                    maximal: bool = False) -> dict[str, Any]:
     """Evaluate a saved :class:`Result` (JSON of ``Result.to_dict()``) against Fit4CAD ground truth.
@@ -395,33 +420,7 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
         was scored.
     """
     rpath = Path(result_json_path)
-    text = read_text(rpath)
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{rpath}: malformed JSON ({exc.msg} at line {exc.lineno})") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{rpath}: expected a JSON object, got {type(data).__name__}")
-    try:  # the format before the keys: another tool's JSON is named as such
-        check_header(data)
-    except ValueError as exc:
-        raise InputError(f"{rpath}: {exc}") from None
-    for key in ("n_points", "segments"):
-        if key not in data:
-            raise InputError(f"{rpath}: missing key {key!r}")
-    try:
-        result = Result.from_dict(data)
-    except KeyError as exc:
-        raise InputError(f"{rpath}: a segment lacks key {exc.args[0]!r}") from None
-    except (TypeError, ValueError, OverflowError) as exc:  # OverflowError: an index past int64
-        raise InputError(f"{rpath}: invalid result ({exc})") from None
-
-    if result.n_points < 0:
-        raise InputError(f"{rpath}: n_points is negative ({result.n_points})")
-    try:
-        result = in_file_rows(result)
-    except ValueError as exc:
-        raise InputError(f"{rpath}: invalid result ({exc})") from None
+    result = _read_result(rpath)
     gt_file = ground_truth_for(ground_truth_path)
     gt = read_fit4cad_segments(gt_file)
     n = result.n_points
@@ -438,13 +437,6 @@ def evaluate_files(result_json_path: str | Path, ground_truth_path: str | Path,
         raise InputError(
             f"{gt_file}: index {gt_max + 1} (1-based) exceeds the result's n_points {n}"
         )
-    for s in result.segments:
-        for idx in (s.indices, s.edges, *(p.edges for p in s.parts)):
-            if idx.ndim != 1:
-                raise InputError(f"{rpath}: segment {s.id} indices are not a flat list")
-            if idx.size and (idx.min() < 0 or idx.max() >= n):
-                bad = int(idx.min()) if idx.min() < 0 else int(idx.max())
-                raise InputError(f"{rpath}: segment {s.id} index {bad} out of range [0, {n})")
     # Fit4CAD's ground truth has one segment per CAD face: by default a
     # maximal primitive is scored by its connected parts.
     pred = [s.with_edges() for s in result.segments] if maximal else result.faces()

@@ -349,7 +349,8 @@ def _check_partition(n: int, segments: list[Segment], unsegmented: np.ndarray) -
     """ValueError unless every index is one of the n points (-1 labelled the last point) and each
     segment's parts hold its points (the faces that are scored). A point may be in two segments:
     a ground truth's faces share their boundary points, and scores it against itself as 1."""
-    for idx in [s.indices for s in segments] + [s.edges for s in segments] + [unsegmented]:
+    edges = [e for s in segments for e in (s.edges, *(p.edges for p in s.parts))]
+    for idx in [s.indices for s in segments] + edges + [unsegmented]:
         bad = idx[(idx < 0) | (idx >= n)]
         if len(bad):
             raise ValueError(f"point index {int(bad[0])} out of range for the result's {n} points")
@@ -364,4 +365,6 @@ def _indices(values: Any) -> np.ndarray:
     arr = np.asarray(values)
     if arr.size and arr.dtype.kind not in "iu":
         raise ValueError(f"point indices must be whole numbers, got {arr.dtype} values")
+    if arr.ndim != 1:
+        raise ValueError("point indices must be a flat list")
     return arr.astype(np.int64)
