@@ -231,7 +231,9 @@ def dying_segment_cloud(job: CloudJob) -> BatchRow:
 def test_a_worker_killed_mid_batch_still_gives_every_cloud_ok(first_run, clouds: Path, tmp_path: Path):
     _, first, *_ = first_run
     inputs = [str(clouds / n) for n in ("part0.ply", "part1.txt", "part2.ply")]
-    rows = houghcad.batch(inputs, tmp_path, workers=2, retries=1, task=dying_segment_cloud, seed=1, merge=False)
+    # A Tolerances object is taken as Segmenter takes it (the defaults: the same results).
+    rows = houghcad.batch(inputs, tmp_path, workers=2, retries=1, task=dying_segment_cloud, seed=1, merge=False,
+                          tolerances=houghcad.Tolerances())
     assert (tmp_path / ".killed").is_file()  # a worker did die
     assert all(isinstance(r, BatchRow) for r in rows) and [r.status for r in rows] == ["ok"] * 3, rows
     assert all(r.peak_mb and r.peak_mb > 50 for r in rows)
@@ -262,6 +264,7 @@ def test_same_stem_in_two_folders_is_refused_before_starting(clouds: Path, tmp_p
     (["--families", "plane,blob"], "blob"),
     (["--tolerance", "recognition.nonsense=1"], "nonsense"),
     (["--timeout", "-3"], "--timeout"),
+    (["--epsilon", "2"], "--epsilon"),
     (["--fit4cad", "somewhere"], "somewhere"),  # a flag in batch: the outputs go to OUTDIR
 ])
 def test_usage_errors_exit_2_with_one_line(clouds: Path, tmp_path: Path, extra, word):
@@ -398,6 +401,9 @@ def test_scheduler_address_runs_on_its_workers_and_a_given_client_stays_open(das
                                  str(tmp_path / "cli"), "--scheduler", dask_scheduler, *SEGMENT_OPTIONS])
     assert code == 0, stderr
     assert "2 clouds: 2 ok" in stdout
+    # Started with --no-dashboard, it still reports its HTTP server's port as the dashboard's,
+    # whose /status page is a 404: no link to it.
+    assert "Dask dashboard" not in stderr and "[2/2]" in stderr, stderr
     for stem in ("part0", "part1"):
         assert _result(tmp_path / "cli" / f"{stem}_segments.json") == _result(first / f"{stem}_segments.json")
     with Client(dask_scheduler) as client:
@@ -465,3 +471,144 @@ def test_a_family_file_is_loaded_on_the_workers_and_left_out_of_the_registry(tmp
     finally:
         REGISTRY.pop("batch_paraboloid", None)
     assert result == _result(tmp_path / "seg.json")
+
+
+# --------------------------------------------------------------------------- options of the Python API
+
+
+@pytest.mark.parametrize("options,word", [
+    ({"epsilon": 2.0}, "epsilon must be a fraction of the diagonal in (0, 0.5)"),  # the CLI's --epsilon 2 too
+    ({"epsilon": "0.01"}, "epsilon must be a number"),
+    ({"persistence": 1.5}, "persistence"),
+    ({"bogus": 3}, "unknown option bogus"),
+    ({"n_jobs": 2}, "unknown option n_jobs"),
+    ({"families": ["plane", "cylinder"]}, "families must be a string"),
+    ({"families": "plane,blob"}, "blob"),
+    ({"tolerances": {"recognition.nonsense": 1}}, "nonsense"),
+    ({"tolerances": {"recognition": {"keep_share": -1}}}, "keep_share must be positive"),
+    ({"tolerances": [("recognition.keep_share", 0.5)]}, "tolerances must be a Tolerances, a dict or None"),
+    ({"normals_method": "bogus"}, "unknown normals method 'bogus'"),
+    ({"noise": "loud"}, "noise must be one of"),
+    ({"min_points": 1}, "min_points"),
+    ({"seed": -1}, "seed"),
+    ({"max_points": 10}, "max_points must be a whole number of at least 1000"),
+    ({"merge": "no"}, "merge must be True or False"),
+    ({"timeout": -1}, "timeout must be a positive number"),
+])
+def test_a_bad_option_is_one_input_error_before_any_cloud_runs(clouds: Path, tmp_path: Path, options, word):
+    with pytest.raises(houghcad.InputError) as caught:
+        houghcad.batch(str(clouds / "part0.ply"), tmp_path / "out", workers=1, **options)
+    assert word in str(caught.value) and "\n" not in str(caught.value)
+    assert not (tmp_path / "out").exists()  # refused before the cluster and the output folder
+
+
+def test_tolerances_given_as_a_tolerances_object_or_either_dict_are_the_same_options(tmp_path: Path):
+    from houghcad.batchcheck import segment_options
+
+    expected = (("recognition.keep_share", 0.5),)
+    for given in (houghcad.Tolerances.from_dict({"recognition.keep_share": 0.5}),
+                  {"recognition": {"keep_share": 0.5}}, {"recognition.keep_share": 0.5}):
+        opts = segment_options({"tolerances": given})
+        assert opts.tolerances == expected and opts.segment_kwargs()["tolerances"] == {"recognition.keep_share": 0.5}
+    assert segment_options({"tolerances": houghcad.Tolerances()}).tolerances == ()
+    (tmp_path / "fams.py").write_text("")  # one path, not a list: taken whole, not letter by letter
+    assert segment_options({"family_files": str(tmp_path / "fams.py")}).family_files == (str(tmp_path / "fams.py"),)
+
+
+# --------------------------------------------------------------------------- a script without the main guard
+
+
+def test_in_a_worker_importing_the_main_script_batch_refuses_at_once(monkeypatch, clouds: Path, tmp_path: Path,
+                                                                     capsys):
+    import multiprocessing
+
+    from houghcad.batchcheck import MARKER, UNGUARDED
+
+    # What a worker spawned by Dask sees while it runs the parent's main script (checked with a
+    # real worker: parent_process() is still None then, and __main__ not yet renamed).
+    monkeypatch.setattr(multiprocessing.current_process(), "_inheriting", True, raising=False)
+    monkeypatch.setattr(sys, "excepthook", sys.excepthook)  # restored after the test
+    marker = tmp_path / "unguarded"
+    monkeypatch.setenv(MARKER, str(marker))
+    with pytest.raises(houghcad.InputError) as caught:
+        houghcad.batch(str(clouds / "part0.ply"), tmp_path / "out", epsilon=2.0)  # refused before the options
+    assert str(caught.value) == UNGUARDED and 'if __name__ == "__main__":' in UNGUARDED
+    assert marker.is_file() and not (tmp_path / "out").exists()
+    # The worker dies of it: silent when the batch that started it says it (the marker)...
+    sys.excepthook(type(caught.value), caught.value, None)
+    assert capsys.readouterr().err == ""
+    # ...one line otherwise; and any other exception as before.
+    monkeypatch.delenv(MARKER)
+    with pytest.raises(houghcad.InputError) as again:
+        houghcad.batch(str(clouds / "part0.ply"), tmp_path / "out")
+    sys.excepthook(type(again.value), again.value, None)
+    assert capsys.readouterr().err == f"houghcad: error: {UNGUARDED}\n"
+    sys.excepthook(ValueError, ValueError("something else"), None)
+    assert "ValueError: something else" in capsys.readouterr().err
+
+
+def test_a_script_calling_batch_without_the_main_guard_fails_with_one_message(clouds: Path, tmp_path: Path):
+    from houghcad.batchcheck import UNGUARDED
+
+    script = tmp_path / "unguarded.py"  # as a user would paste the README's example, without the guard
+    script.write_text(f"import houghcad\nrows = houghcad.batch({str(clouds / 'part0.ply')!r}, "
+                      f"{str(tmp_path / 'out')!r}, workers=2)\nprint('rows', rows)\n")
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 1 and proc.stdout == "" and time.monotonic() - t0 < 60
+    # The parent's own traceback, ending with the one line; nothing from the workers nor from Dask.
+    assert proc.stderr.count("Traceback") == 1 and proc.stderr.endswith(f"houghcad.errors.InputError: {UNGUARDED}\n")
+    assert "Nanny" not in proc.stderr and "RuntimeError" not in proc.stderr and "distributed" not in proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
+# --------------------------------------------------------------------------- workers that die
+
+
+KILLER = '''
+import os, signal
+try:
+    from distributed import get_worker
+
+    get_worker()
+except (ImportError, ValueError):  # checking the options, in the batch's own process
+    pass
+else:  # on a worker, for every attempt of every cloud
+    os.kill(os.getpid(), signal.SIGKILL)
+'''
+
+
+def test_clouds_whose_workers_die_give_one_wording_and_no_dask_log_lines(clouds: Path, tmp_path: Path):
+    # A cloud whose worker died twice read "worker died (exit code -9)" when its first start
+    # event was lost with its worker, and the scheduler's ERROR line reached stderr under -q.
+    (tmp_path / "killer.py").write_text(KILLER)
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "houghcad", "batch", str(clouds / "part0.ply"), str(clouds / "part2.ply"),
+                           "-o", str(out), "--workers", "2", "--retries", "1", "-q",
+                           "--family-file", str(tmp_path / "killer.py")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1 and proc.stdout == ""
+    died = "worker died 2 times (exit code -9) (SIGKILL: out of memory?)"
+    lines = proc.stderr.splitlines()  # the two failures, in the order they ended, and nothing else
+    assert [line[:6] for line in lines] == ["[1/2] ", "[2/2] "], proc.stderr
+    assert sorted(line[6:] for line in lines) == [f"error    {clouds / n}: {died}" for n in ("part0.ply", "part2.ply")]
+    rows, _ = _summary(out)
+    assert [(r["status"], r["error"]) for r in rows] == [("error", died)] * 2
+
+
+def test_a_cloud_that_left_rows_out_is_scored_in_its_file_rows(tmp_path: Path):
+    # Rows 2 and 5 of the file were left out (--drop-invalid): the truth numbers the file's rows.
+    from houghcad.batch import _measures
+    from houghcad.result import Result, Segment
+
+    rows = np.setdiff1d(np.arange(30), [2, 5])
+    gt = tmp_path / "c_primitives.txt"
+    gt.write_text("".join(f"Primitive{j + 1}:=[{' '.join(str(r + 1) for r in part)}];\n"
+                          for j, part in enumerate((rows[:14], rows[14:]))))
+    segs = [Segment(0, "plane", np.arange(14), {}, 0.0), Segment(1, "plane", np.arange(14, 28), {}, 0.0)]
+    result = Result(28, segs, np.zeros(0, np.int64),
+                    options={"input": {"rows": 30, "drop_invalid": True, "dropped_rows": [[2, 3], [5, 6]]}})
+    job = CloudJob(str(tmp_path / "c.xyz"), "c.xyz", str(tmp_path), "c", ("json",), SegmentOptions(),
+                   ground_truth=str(gt))
+    measures, problem = _measures(job, result)
+    assert problem is None and measures["DSC"] == 1.0

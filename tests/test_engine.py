@@ -34,6 +34,11 @@ def die(code: int) -> int:
     os._exit(code)
 
 
+def die_at_once(code: int) -> int:
+    """Ends its worker before the start event, batched, has left it."""
+    os._exit(code)
+
+
 def nap_or_die(item: tuple[str, float, str]) -> str:
     """``("nap", s, _)`` sleeps s seconds; ``("again", s, marker)`` returns at once the first
     time and sleeps s seconds when computed again; ``("die", _, marker)`` writes the marker and
@@ -160,3 +165,87 @@ def test_bad_arguments_and_use_outside_a_cluster():
         Engine().run(abs, [1])
     report("nothing")  # outside a worker: does nothing
     assert reset_peak_rss() in (True, False) and peak_rss_mb() > 10
+
+
+def test_every_item_that_died_as_often_says_so_in_the_same_words():
+    # One item lost its start events with its workers and read "worker died (exit code 5)",
+    # the other "worker died 2 times (exit code 5)": the count is the scheduler's now.
+    with Engine(workers=2, retries=1) as engine:
+        out = engine.run(die_at_once, [5, 5])
+    assert [(o.status, o.error, o.attempts) for o in out] == [("died", "worker died 2 times (exit code 5)", 2)] * 2
+
+
+def test_a_killed_workers_deaths_and_pid_come_from_the_scheduler():
+    from types import SimpleNamespace
+
+    from distributed.scheduler import KilledWorker
+
+    from houghcad.enginedask import death_message, killed_worker
+
+    assert killed_worker(KilledWorker("k", SimpleNamespace(pid=4321), 2)) == (3, 4321)
+    assert killed_worker(ValueError("not Dask's")) == (None, None)
+    assert death_message(1, 7) == "worker died (exit code 7)"
+    assert death_message(3, -9) == "worker died 3 times (exit code -9) (SIGKILL: out of memory?)"
+    assert death_message(2, None) == "worker died 2 times"
+
+
+class _Link:
+    """A client as far as the dashboard link goes."""
+
+    def __init__(self, link: str | None = None, error: type[Exception] | None = None) -> None:
+        self.link, self.error = link, error
+
+    @property
+    def dashboard_link(self) -> str | None:
+        if self.error is not None:
+            raise self.error("services")
+        return self.link
+
+
+def test_the_dashboard_link_is_given_only_when_the_scheduler_serves_the_page():
+    import http.server
+    import threading
+
+    class Server(http.server.BaseHTTPRequestHandler):
+        # As a scheduler's HTTP server: started with --no-dashboard it has no /status (404); the
+        # dashboard's handler, or the page asking for bokeh, takes GET only (HEAD: 405).
+        def do_HEAD(self) -> None:
+            self.send_response(405 if self.path == "/status" else 404)
+            self.end_headers()
+
+        def log_message(self, *args) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Server)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    base = f"http://127.0.0.1:{server.server_address[1]}"
+    try:
+        assert Engine(_Link(f"{base}/status")).dashboard_link == f"{base}/status"
+        assert Engine(_Link(f"{base}/gone")).dashboard_link is None
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert Engine(_Link(f"{base}/status")).dashboard_link is None  # nothing listens there now
+    assert Engine(_Link("")).dashboard_link is None and Engine(_Link(error=KeyError)).dashboard_link is None
+    assert Engine().dashboard_link is None  # outside its 'with' block
+
+
+def test_a_taken_dashboard_port_is_no_warning_and_the_link_gives_the_port_used():
+    import socket
+    import warnings
+
+    holder = socket.socket()
+    try:
+        holder.bind(("127.0.0.1", 8787))  # else something holds it already: the same case
+        holder.listen()
+    except OSError:
+        pass
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with Engine(workers=1) as engine:
+                link = engine.dashboard_link
+    finally:
+        holder.close()
+    assert not [w for w in caught if "already in use" in str(w.message)]
+    assert link.startswith("http://127.0.0.1:") and ":8787/" not in link

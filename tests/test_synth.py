@@ -7,6 +7,7 @@ parameters*, so these tests validate the parameters as much as the points.
 from __future__ import annotations
 
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -471,3 +472,58 @@ def test_bundled_demo_matches_generator():
     cloud = S.block_with_hole_and_slot(seed=7, n_points=12000, noise=0.001)
     xyz = np.column_stack([v["x"], v["y"], v["z"]]).astype(float)
     assert np.allclose(xyz, cloud.points, atol=1e-4 * cloud.diagonal())
+
+
+# --------------------------------------------------------------------------- python -m houghcad.synth
+
+
+def _package_data() -> dict[str, bytes]:
+    data = resources.files("houghcad") / "data"
+    return {name: (data / name).read_bytes() for name in ("demo_part.ply", "demo_part_primitives.txt")}
+
+
+def test_synth_main_help_and_no_arguments_write_nothing(tmp_path):
+    # `python -m houghcad.synth --help` used to ignore its arguments and rewrite the package's data.
+    import subprocess
+    import sys
+
+    before = _package_data()
+    data = Path(str(resources.files("houghcad") / "data"))
+    stamps = {p.name: p.stat().st_mtime_ns for p in data.iterdir()}
+    for argv in (["--help"], []):
+        proc = subprocess.run([sys.executable, "-m", "houghcad.synth", *argv], capture_output=True, text=True,
+                              cwd=tmp_path, timeout=120)
+        if argv:
+            assert proc.returncode == 0 and "--package-data" in proc.stdout and "-o DIR" in proc.stdout
+            assert "demo_part_primitives.txt" in " ".join(proc.stdout.split())
+        else:  # where to write must be said
+            assert proc.returncode == 2 and proc.stderr.count("\n") == 2 and "Traceback" not in proc.stderr
+            assert "one of the arguments -o/--output --package-data is required" in proc.stderr
+    assert _package_data() == before and {p.name: p.stat().st_mtime_ns for p in data.iterdir()} == stamps
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_synth_main_writes_the_demo_where_it_is_told(tmp_path, monkeypatch, capsys):
+    from plyfile import PlyData
+
+    from houghcad.synth import __main__ as synth_main
+
+    out = tmp_path / "new" / "folder"
+    assert synth_main.main(["-o", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["demo_part.ply", "demo_part_primitives.txt"]
+    assert capsys.readouterr().out == f"wrote {out / 'demo_part.ply'} and {out / 'demo_part_primitives.txt'}\n"
+    assert len(PlyData.read(str(out / "demo_part.ply"))["vertex"]) == 12000
+    assert len(_read_fit4cad(out / "demo_part_primitives.txt")) == 11
+    # --package-data: into the package's data folder (here a stand-in), nowhere else.
+    data = tmp_path / "data"
+    data.mkdir()
+    monkeypatch.setattr(synth_main, "DATA", data)
+    assert synth_main.main(["--package-data"]) == 0
+    for name in ("demo_part.ply", "demo_part_primitives.txt"):
+        assert (data / name).read_bytes() == (out / name).read_bytes()
+    # A file where the folder should be: one line, exit 2.
+    capsys.readouterr()
+    (tmp_path / "a_file").write_text("x")
+    assert synth_main.main(["-o", str(tmp_path / "a_file")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a_file: not a folder" in err

@@ -27,7 +27,7 @@ import json
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -290,15 +290,16 @@ def _measures(job: CloudJob, result: Any) -> tuple[dict[str, float], str | None]
     as ``houghcad evaluate``), and the message of a ground truth that cannot be used."""
     if job.ground_truth is None:
         return {}, None
-    from .evaluate import classification_measures, read_fit4cad_segments
+    from .evaluate import classification_measures, in_file_rows, read_fit4cad_segments
 
     try:
+        result = in_file_rows(result)  # the truth numbers the file's rows, those left out included
         gt = read_fit4cad_segments(job.ground_truth)
         top = max((int(g.max()) for g in gt if g.size), default=-1)
         if top >= result.n_points:
             raise InputError(f"{Path(job.ground_truth).name}: index {top + 1} (1-based) exceeds the cloud's "
                              f"{result.n_points} points")
-    except InputError as exc:
+    except ValueError as exc:  # InputError is one
         return {}, f"ground truth not used: {exc}"
     m = classification_measures(result.faces(), gt, result.n_points)
     return {k: float(m[k]) for k in MEASURES}, None
@@ -361,40 +362,16 @@ def error_row(job: CloudJob, message: str, seconds: float | None = None) -> Batc
 # --------------------------------------------------------------------------- the batch
 
 
-_OPTION_NAMES = {f.name for f in fields(SegmentOptions)}
-
-
-def _options(options: dict[str, Any]) -> SegmentOptions:
-    """Checked :class:`SegmentOptions` from ``batch``'s keyword options (families and tolerances
-    are checked now, in this process: a mistake is one error, not one per cloud)."""
-    unknown = set(options) - _OPTION_NAMES
-    if unknown:
-        raise TypeError(f"batch() got unknown options {sorted(unknown)} (known: {', '.join(sorted(_OPTION_NAMES))})")
-    files = tuple(str(Path(p).absolute()) for p in options.pop("family_files", ()) or ())
-    tolerances = options.pop("tolerances", None) or {}
-    if tolerances:
-        from .tolerances import Tolerances
-
-        try:
-            Tolerances.from_dict(dict(tolerances))
-        except ValueError as exc:
-            raise InputError(f"tolerances: {exc}") from None
-    families = options.get("families", "simple")
-    if not isinstance(families, str):
-        raise TypeError("batch(): families must be a string ('simple', 'all' or comma-separated names)")
-    with _user_families(files):
-        from .families import select
-
-        select(families)
-    return SegmentOptions(family_files=files, tolerances=tuple(sorted(tolerances.items())), **options)
-
-
 def batch(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out_dir: str | os.PathLike[str],
           client: Any = None, *, scheduler: str | None = None, workers: int | None = None, retries: int = 2,
           timeout: float | None = None, force: bool = False, fit4cad: bool = False, ply: bool = False,
           png: bool = False, report: bool = False, progress: BatchProgress | None = None,
           task: Callable[[CloudJob], BatchRow] = segment_cloud, **options: Any) -> list[BatchRow]:
     """Segment many point clouds on a Dask cluster; returns one :class:`BatchRow` per input, in order.
+
+    In a script, call it under ``if __name__ == "__main__":``: the workers of a local cluster run
+    the main script again (``multiprocessing``'s spawn) before they start, and a call outside the
+    guard raises InputError there (the batch then fails with that one message).
 
     Parameters
     ----------
@@ -424,17 +401,21 @@ def batch(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out
     **options
         Options of :func:`houghcad.segment`: ``families`` (a string), ``epsilon``, ``seed``,
         ``normals_method``, ``noise``, ``persistence``, ``min_points``, ``tolerances``
-        (``{"stage.name": value}``), ``merge``, and ``family_files`` (paths of files calling
-        :func:`houghcad.define_family`).
+        (``{"stage.name": value}``, ``{"stage": {"name": value}}`` or a Tolerances), ``merge``,
+        ``max_points``, ``full_resolution``, ``scan``, ``drop_invalid``, and ``family_files``
+        (paths of files calling :func:`houghcad.define_family`); checked as Segmenter checks them.
 
     Raises
     ------
     InputError
-        An input names nothing, two inputs share a stem, a bad option, an unusable ``out_dir``.
+        Before any cloud runs: an input names nothing, two inputs share a stem, a bad or unknown
+        option, an unusable ``out_dir``, a call from a worker importing the main script.
     """
-    from . import batchreport
+    from . import batchcheck, batchreport
 
-    opts = _options(options)
+    batchcheck.refuse_in_a_worker()  # first: a worker importing an unguarded script must not go on
+    batchcheck.check_timeout(timeout)
+    opts = batchcheck.segment_options(options)
     outputs = [k for k, on in (("fit4cad", fit4cad), ("ply", ply), ("png", png), ("report", report)) if on]
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -467,13 +448,19 @@ def batch(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out
 def _engine(client: Any, scheduler: str | None, workers: int | None, retries: int,
             timeout: float | None) -> Iterator[Any]:
     """The started engine; a scheduler that cannot be reached is an InputError."""
+    from .batchcheck import UNGUARDED, watching_workers
     from .engine import Engine
 
     engine = Engine(client, scheduler=scheduler, workers=workers, retries=retries, timeout=timeout)
-    try:
-        engine.__enter__()
-    except (OSError, TimeoutError, ValueError) as exc:  # ValueError: an address Dask cannot parse
-        raise InputError(f"{scheduler or 'local cluster'}: cannot start the batch ({exc})") from None
+    with watching_workers() as unguarded:
+        try:
+            engine.__enter__()
+        except Exception as exc:
+            if unguarded():  # the workers failed to start because the script runs batch() unguarded
+                raise InputError(UNGUARDED) from None
+            if not isinstance(exc, (OSError, TimeoutError, ValueError)):  # ValueError: an address Dask cannot parse
+                raise
+            raise InputError(f"{scheduler or 'local cluster'}: cannot start the batch ({exc})") from None
     try:
         yield engine
     finally:

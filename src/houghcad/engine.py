@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import logging
 import os
 import queue
 import re
@@ -39,9 +38,12 @@ import signal
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterator, Sequence
+import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+from .enginedask import ExitCodes, dask_logs_routed, death_message, killed_worker, served_dashboard
 
 __all__ = ["Engine", "Outcome", "report", "peak_rss_mb", "reset_peak_rss"]
 
@@ -55,7 +57,6 @@ EXIT_CODE_WAIT = 2.0
 STOP_WAIT = 30.0
 #: States of a client future that has ended for good (a "lost" future is computed again).
 _ENDED = ("finished", "error", "cancelled")
-_DEATH = re.compile(r"Worker process (\d+) (?:exited with status|was killed by signal) (\d+)")
 
 
 class _InterruptFlag:
@@ -202,45 +203,6 @@ def _run_item(func: Callable[[Any], Any], setup: Callable[[], Any] | None, item:
 # --------------------------------------------------------------------------- client side
 
 
-class _ExitCodes(logging.Handler):
-    """Collects ``pid -> exit code`` of the worker processes that the nannies of a local cluster
-    (in this process) saw die; Dask says it only in its log."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.INFO)
-        self.codes: dict[int, int] = {}
-
-    def emit(self, record: logging.LogRecord) -> None:
-        found = _DEATH.search(record.getMessage())
-        if found:
-            code = int(found.group(2))
-            self.codes[int(found.group(1))] = -code if "signal" in record.getMessage() else code
-
-
-@contextlib.contextmanager
-def _quiet_dask_logs(codes: _ExitCodes) -> Iterator[None]:
-    """Dask's warnings (a restarted worker, a cancelled task) off stderr while a cluster that
-    the engine started runs, in this process and in its workers; the nannies' exit codes are kept."""
-    dist, nanny = logging.getLogger("distributed"), logging.getLogger("distributed.nanny")
-    saved = dist.level, nanny.level, nanny.propagate, os.environ.get("DASK_LOGGING__DISTRIBUTED")
-    dist.setLevel(logging.ERROR)
-    nanny.setLevel(logging.INFO)
-    nanny.propagate = False
-    nanny.addHandler(codes)
-    os.environ["DASK_LOGGING__DISTRIBUTED"] = "error"  # read by the spawned workers
-    try:
-        yield
-    finally:
-        nanny.removeHandler(codes)
-        dist.setLevel(saved[0])
-        nanny.setLevel(saved[1])
-        nanny.propagate = saved[2]
-        if saved[3] is None:
-            os.environ.pop("DASK_LOGGING__DISTRIBUTED", None)
-        else:
-            os.environ["DASK_LOGGING__DISTRIBUTED"] = saved[3]
-
-
 @dataclass
 class _Running:
     """What the client knows of one submitted item."""
@@ -291,9 +253,10 @@ class Engine:
         self.timeout = timeout
         self._stack: contextlib.ExitStack | None = None
         self._local = False  # a local cluster started here: its nannies log in this process
-        self._codes = _ExitCodes()
+        self._codes = ExitCodes()
         self._restarts: list[threading.Thread] = []  # workers being restarted after a timeout
         self._stopped: set[tuple[Any, int]] = set()  # (address, pid) of workers stopped after a timeout
+        self._dashboard: str | None = None  # the served dashboard's link, "" for none (None: not asked)
 
     # ----------------------------------------------------------------- lifecycle
 
@@ -308,14 +271,16 @@ class Engine:
             if self.scheduler is not None:
                 self.client = stack.enter_context(Client(self.scheduler, timeout="10s"))
             else:
-                stack.enter_context(_quiet_dask_logs(self._codes))
+                stack.enter_context(dask_logs_routed(self._codes))
                 # One task per single-threaded worker at a time (saturation 1.0): a worker
                 # restarted after a timeout holds no other task.
                 stack.enter_context(dask.config.set({"distributed.scheduler.allowed-failures": self.retries,
                                                      "distributed.scheduler.worker-saturation": 1.0}))
-                cluster = stack.enter_context(LocalCluster(
-                    n_workers=self.workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                    host="127.0.0.1", dashboard_address="127.0.0.1:8787"))
+                with warnings.catch_warnings():  # 8787 taken: Dask takes a free port, dashboard_link says which
+                    warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
+                    cluster = stack.enter_context(LocalCluster(
+                        n_workers=self.workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                        host="127.0.0.1", dashboard_address="127.0.0.1:8787"))
                 self.client = stack.enter_context(Client(cluster))
                 self._local = True
         except BaseException:
@@ -327,13 +292,19 @@ class Engine:
     def __exit__(self, *exc: Any) -> None:
         if self._stack is not None:
             stack, self._stack = self._stack, None
-            self.client, self._local = None, False
+            self.client, self._local, self._dashboard = None, False, None
             stack.close()
 
     @property
     def dashboard_link(self) -> str | None:
-        """Address of the Dask dashboard (a page served only when bokeh is installed)."""
-        return getattr(self.client, "dashboard_link", None)
+        """Address of the Dask dashboard (its pages need bokeh), None when the scheduler serves
+        none (asked once: a running scheduler may have been started with ``--no-dashboard``)."""
+        if self.client is None:
+            return None
+        if self._dashboard is None:
+            self._dashboard = (getattr(self.client, "dashboard_link", None) if self._local
+                               else served_dashboard(self.client)) or ""
+        return self._dashboard or None
 
     @property
     def n_workers(self) -> int:
@@ -443,23 +414,22 @@ class Engine:
             return Outcome(status="cancelled", error="cancelled", **base)
         exc = future.exception() if future.status == "error" else None
         if type(exc).__name__ == "KilledWorker":
-            return Outcome(status="died", error=self._death_message(state), **base)
+            # The scheduler's count: a worker killed at once may die before its start event arrives.
+            deaths, pid = killed_worker(exc)
+            base["attempts"] = max(base["attempts"], deaths or 0)
+            return Outcome(status="died", error=self._death_message(state, deaths, pid), **base)
         if exc is None:  # Dask gave no error (not seen: run() waits for a lost result to be recomputed)
             return Outcome(status="died", error="worker lost the task without an error", **base)
         return Outcome(status="failed", error=_one_line(f"{type(exc).__name__}: {exc}"), **base)
 
-    def _death_message(self, state: _Running) -> str:
-        """``worker died (exit code N)``; the code is known on a local cluster the engine started."""
-        pid = state.pids[-1] if state.pids else None
+    def _death_message(self, state: _Running, deaths: int | None, pid: int | None) -> str:
+        """:func:`death_message` of ``deaths`` (else the attempts seen); the last worker's exit
+        code is known on a local cluster the engine started."""
+        pid = pid if pid is not None else (state.pids[-1] if state.pids else None)
         deadline = time.monotonic() + (EXIT_CODE_WAIT if self._local else 0.0)
         while pid is not None and pid not in self._codes.codes and time.monotonic() < deadline:
             time.sleep(POLL)  # the nanny may log the exit just after the scheduler gave up
-        code = self._codes.codes.get(pid) if pid is not None else None
-        times = f" {state.attempts} times" if state.attempts > 1 else ""
-        if code is None:
-            return f"worker died{times}"
-        hint = " (SIGKILL: out of memory?)" if code == -9 else ""
-        return f"worker died{times} (exit code {code}){hint}"
+        return death_message(deaths or state.attempts, self._codes.codes.get(pid) if pid is not None else None)
 
     def _expire(self, running: dict[str, _Running], outcomes: dict[int, Outcome],
                 on_outcome: Callable | None) -> bool:
