@@ -310,3 +310,12 @@ def test_normal_lines_of_a_circle_meet_at_its_centre():
     ext = float(np.ptp(Q, axis=0).max())
     (c,) = normal_line_peaks(Q, M, lo, ext, 40, 0.6 * ext, 0.1, 10.0, 5)
     assert np.linalg.norm(c - [0.3, -0.2]) <= ext / 40
+
+
+def test_a_grid_narrower_than_rounding_bins_nothing():
+    # A cluster a rounding step wide far from the origin (a scan rounded to float32): the grid's
+    # upper corner rounds onto its lower one, its cells have width 0, and the vote divided by
+    # zero (ZeroDivisionError from the kernel, a traceback for the user).
+    Q = np.full((20, 2), 1e6) + np.linspace(0, 1e-11, 20)[:, None]
+    M = np.tile([1.0, 0.0], (20, 1))
+    assert normal_line_peaks(Q, M, Q.min(axis=0), 1e-11, 16, 1e-11, 0.1, 1, 4).shape == (0, 2)

@@ -200,3 +200,21 @@ def test_a_run_uses_one_blas_thread_and_gives_the_callers_back():
         houghcad.segment(P, families="plane", n_jobs=1, trace=lambda step, name, seg: seen.append(blas_threads()))
         assert blas_threads() == before
     assert seen and all(n == 1 for threads in seen for n in threads)
+
+
+def _die_by_signal() -> None:
+    import os
+
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+@needs_fork
+def test_a_worker_that_dies_stops_the_wait_instead_of_hanging(run):
+    # A crash in native code (CGAL on a degenerate cluster) killed a worker: the Pool started
+    # another in its place and the run waited for the lost task forever.
+    ctx, fams = run
+    with Workers(ctx, fams, 2) as w:
+        t = time.perf_counter()
+        with pytest.raises(parallel.WorkerDied, match="SIGKILL"):
+            w._get(w.pool.apply_async(_die_by_signal))
+        assert time.perf_counter() - t < 10

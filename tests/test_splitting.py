@@ -208,3 +208,19 @@ def test_where_the_vote_finds_nothing_the_fallback_in_larger_pieces_is_taken(mon
     seg.check()
     assert len(seg) == 2 and seg[1].family.name == "cylinder"
     assert (seg.labels[hole] == 1).all()
+
+
+def test_ransac_skips_points_on_one_line():
+    # CGAL's Efficient RANSAC wrote through a null pointer on these 51 points of one edge, their
+    # normals those of its two faces (a scan rounded to a coarse grid): the process died with
+    # SIGSEGV. Points on one line determine no surface.
+    from dataclasses import replace
+
+    from houghcad.ransac import ransac_pieces
+
+    ctx = context(synth.block_with_hole_and_slot(seed=3, n_points=4000).points)
+    P, N = ctx.pre.points.copy(), ctx.pre.normals.copy()
+    P[:51] = np.array([-0.12, 0.35, 0.08]) + np.outer(np.linspace(0, 0.0738, 51), [0.0, 1.0, 0.0])
+    N[:51] = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, 0, -1.0]])[np.arange(51) % 3]
+    edge = replace(ctx, pre=replace(ctx.pre, points=P, normals=N), tau=6.4e-5, link=0.0076)
+    assert ransac_pieces(np.arange(51), edge) == []

@@ -111,7 +111,11 @@ def accumulate(grid: Grid, voter: np.ndarray, values: np.ndarray, weights: np.nd
 def _bin(v, lower, width, bins, wrap):
     """The bin of value ``v`` along one axis of a grid (from ``lower``, ``width`` wide, ``bins``
     of them, cyclic when ``wrap``), or -1 when it falls outside (NaN and inf included): the
-    one binning rule of :func:`_vote` and :func:`_line_vote`."""
+    one binning rule of :func:`_vote` and :func:`_line_vote`. A grid too narrow to differ from its
+    lower corner in float64 (a cluster a rounding step wide, far from the origin) has cells of
+    width 0: nothing falls in them."""
+    if not width > 0.0:
+        return np.int64(-1)
     x = np.floor((v - lower) / width)
     if not (abs(x) < 2.0 ** 62):  # NaN, inf, or far outside
         return np.int64(-1)

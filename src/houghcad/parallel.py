@@ -37,6 +37,13 @@ if TYPE_CHECKING:  # the pipeline's modules import this one
 PARALLEL_MIN_POINTS = 100
 #: Evaluation tasks per worker: the peaks' costs vary, more tasks than workers even them out.
 EVALUATE_TASKS_PER_JOB = 3
+#: Seconds between checks, while results are awaited, that no worker has died.
+POLL_SECONDS = 0.25
+
+
+class WorkerDied(RuntimeError):
+    """A worker process died in a task (a crash in native code: a Pool would wait for its task
+    forever). A bug, not bad input: the message names the signal."""
 
 #: In a worker: the run's context at the fork and its families by name.
 _BASE: "tuple[Context, dict[str, Family]] | None" = None
@@ -161,6 +168,7 @@ class Workers:
             _BASE = (ctx, self.by_name)
             try:
                 self.pool = mp.get_context("fork").Pool(n_jobs, initializer=_ignore_interrupts)
+                self._procs = list(self.pool._pool)  # the Pool replaces a dead worker, silently
             finally:
                 _BASE = None  # only the children need it
 
@@ -175,6 +183,22 @@ class Workers:
             self.pool.terminate()
             self.pool.join()
             self.pool = None
+
+    def _get(self, pending: Any) -> Any:
+        """``pending.get()`` (an AsyncResult, or an imap iterator's ``next``), checking that no
+        worker died meanwhile: the Pool starts a new worker in a dead one's place, and its task
+        never returns."""
+        get = pending.get if hasattr(pending, "get") else pending.next
+        while True:
+            try:
+                return get(POLL_SECONDS)
+            except mp.TimeoutError:
+                dead = [p.exitcode for p in self._procs if p.exitcode is not None]
+                if dead:
+                    code = dead[0]
+                    how = f"signal {-code} ({signal.Signals(-code).name})" if code < 0 else f"exit code {code}"
+                    raise WorkerDied(f"a worker process died ({how}); houghcad --jobs 1 runs without "
+                                     "workers") from None
 
     def _overrides(self, ctx: "Context") -> dict[str, Any] | None:
         """The scalar fields in which ``ctx`` differs from the context at the fork, or None when
@@ -229,7 +253,7 @@ class Workers:
 
         def wait() -> list[Any] | None:
             try:
-                return _swap_families(pending.get(), self.by_name.__getitem__)
+                return _swap_families(self._get(pending), self.by_name.__getitem__)
             except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
                 return None
 
@@ -251,7 +275,7 @@ class Workers:
         n = self.n_jobs
         payload = [(func, seg.labels, records, overrides, names, items[j::n], args) for j in range(n)]
         try:
-            parts = _swap_families(self.pool.map(_segmentation_task, payload, chunksize=1),
+            parts = _swap_families(self._get(self.pool.map_async(_segmentation_task, payload, chunksize=1)),
                                    self.by_name.__getitem__)
         except mp.pool.MaybeEncodingError:  # a user family's primitive that does not pickle
             return None
@@ -283,7 +307,9 @@ class Workers:
         assert self.pool is not None
         evaluations: dict[int, list[tuple[list[int], Any]]] = {}
         n_peaks: dict[int, int] = {}
-        for i, props in self.pool.imap_unordered(_tagged_task, tagged):
+        proposals = self.pool.imap_unordered(_tagged_task, tagged)
+        for _ in tagged:
+            i, props = self._get(proposals)
             pairs = list(props)
             n_peaks[i] = len(pairs)
             n = max(1, min(len(pairs), EVALUATE_TASKS_PER_JOB * self.n_jobs))
@@ -294,7 +320,7 @@ class Workers:
         for i in range(len(fams)):
             per: list = [None] * n_peaks[i]
             for where, res in evaluations[i]:
-                for k, cs in zip(where, res.get()):
+                for k, cs in zip(where, self._get(res)):
                     per[k] = cs
             out += [c for cs in per for c in cs]
         return out

@@ -8,6 +8,7 @@ import numpy as np
 
 from .cgal_random import seed_cgal_random
 from .context import Context
+from .families.base import on_one_line
 
 #: RANSAC's distance must be positive (standard units).
 _TINY = 1e-6
@@ -27,6 +28,8 @@ def ransac_pieces(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
     except ImportError:  # pragma: no cover - cgal is a declared dependency
         return []
     P, N = ctx.pre.points[idx], ctx.pre.normals[idx]
+    if on_one_line(P):  # no surface to find, and CGAL's octree writes through a null pointer on it
+        return []
     ps = Point_set_3()
     ps.add_normal_map()
     ps.insert_range(np.ascontiguousarray(P, dtype=np.float64).ravel())

@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 from .aligned import aligned_features
 from .context import Context
 from .families import Family
+from .families.base import on_one_line
 from .growth import absorb, accept
 from .normals import pca_normals
 from .ransac import ransac_pieces
@@ -42,10 +43,6 @@ def clusters(idx: np.ndarray, ctx: Context) -> list[np.ndarray]:
 #: Clusters go to the workers one per task unless the largest holds more than this share of
 #: their points (then its own families and peaks are spread instead).
 CLUSTER_SHARE = 0.5
-#: Second principal spread of a point set, as a share of the first, at or below which the
-#: points lie on one line: float64 rounding of coordinates is ~1e-16 of the extent, and a
-#: face of any real width is many orders above this.
-ROUNDING_SPREAD = 1e-9
 
 
 def splitting_phase(seg: Segmentation, families: list[Family], ctx: Context,
@@ -244,11 +241,3 @@ def _recognised_ahead(seen: list[np.ndarray], families: list[Family], ctx: Conte
         return waited[0].get(k)
 
     return result
-
-
-def on_one_line(P: np.ndarray) -> bool:
-    """Whether the points P (n, 3) lie on one line, or at one point, to
-    rounding: their second principal spread is a rounding-sized fraction of
-    the first."""
-    s = np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
-    return bool(s[1] <= ROUNDING_SPREAD * s[0])

@@ -20,6 +20,20 @@ def regular_indices(n: int, m: int) -> np.ndarray:
     return np.arange(n) if n <= m else np.linspace(0, n - 1, m).astype(np.int64)
 
 
+#: Second principal spread of a point set, as a share of the first, at or below which the
+#: points lie on one line: float64 rounding of coordinates is ~1e-16 of the extent, and a
+#: face of any real width is many orders above this.
+ROUNDING_SPREAD = 1e-9
+
+
+def on_one_line(P: np.ndarray) -> bool:
+    """Whether the points P (n, 3) lie on one line, or at one point, to rounding: their second
+    principal spread is a rounding-sized fraction of the first. Such points determine no
+    surface (every primitive through the line fits them)."""
+    s = np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
+    return bool(s[1] <= ROUNDING_SPREAD * s[0])
+
+
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The cross product of two 3-vectors, with np.cross's arithmetic (the same bits) without
     its broadcasting set-up, which costs tens of microseconds a call: the refits ask for

@@ -45,6 +45,7 @@ from ._geometry import (  # noqa: F401
     gauss_newton,
     lines_intersection,
     normal_equations,
+    on_one_line,
     planes_intersection,
     radial,
     regular_indices,
