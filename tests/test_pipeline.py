@@ -567,7 +567,7 @@ def test_coarse_float32_coordinates_warn():
     import warnings
 
     from houghcad.errors import InputWarning
-    from houghcad.preprocess import float32_resolution
+    from houghcad.rounding import float32_resolution
 
     P = synth.block_with_hole_and_slot(seed=0, n_points=3000).points
     far = P + [3e6, 3e6, 0.0]

@@ -33,7 +33,8 @@ from .multires import Subsample, copy_to_twins, distinct_points, propagate, voxe
 from .output import build_segments
 from .noise import choose
 from .options import MIN_MAX_POINTS, check_options
-from .preprocess import preprocess, warn_coarse_float32
+from .preprocess import preprocess
+from .rounding import warn_coarse_coordinates
 from .recognize import recognize, refine
 from .result import Result
 from .splitting import splitting_phase
@@ -393,7 +394,7 @@ class Segmenter(ParamsMixin):
         pre = preprocess(work, work_normals, method=self.normals_method, seed=self.seed, noise=self.noise,
                          workers=jobs, sampling_scales=tol.scale.link_scale_max > 1.0)
         ctx = self._context(pre, len(work), tol)
-        warn_coarse_float32(points, ctx.spacing / pre.transform.scale, source)
+        warn_coarse_coordinates(points, ctx.spacing / pre.transform.scale, source)
         timing["preprocess"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         with Workers(ctx, fams, jobs) as workers:

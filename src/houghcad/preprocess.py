@@ -7,21 +7,20 @@ parameter can be mapped back to the input's coordinates.
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import InputError, InputWarning
+from .errors import InputError
 from .hough import direction_accumulator, refine_direction
 from .noise import NOISY_SPACINGS
 from .noise import choose as choose_policy
 from .normals import ROWS, by_rows, pca_normals, quadric_residuals, tree_query, voting_normals
 from .scales import link_scale, off_surface
 
-__all__ = ["ROWS", "Preprocessed", "Similarity", "by_rows", "float32_resolution", "pca_normals", "preprocess",
-           "quadric_residuals", "rotation_to_z", "voting_normals", "warn_coarse_float32"]
+__all__ = ["ROWS", "Preprocessed", "Similarity", "by_rows", "pca_normals", "preprocess", "quadric_residuals",
+           "rotation_to_z", "voting_normals"]
 
 
 @dataclass(frozen=True)
@@ -488,31 +487,3 @@ def _standard_frame(x: np.ndarray, nrm: np.ndarray, workers: int = 1) \
     x *= s2
     return R, x, nrm, s2
 
-
-#: Float32 rounding of the coordinates, in point spacings, from which a run warns: measured on
-#: a synthetic block offset to georeferenced coordinates, DSC 0.974 exact, 0.964 at 0.56
-#: spacings (the noise estimate reads the scatter), 0.69 at 1 spacing, 0.14 at 2.
-COARSE_FLOAT32_SPACINGS = 0.5
-
-
-def float32_resolution(points: np.ndarray) -> float:
-    """The rounding step (units) of coordinates that went through float32, as a float32 PLY or
-    PCD of a scan stores them: the float32 spacing at the largest magnitude of the coarsest axis
-    when every coordinate of ``points`` (n, 3) is a float32 value, else 0 (float64 data)."""
-    P = np.asarray(points, dtype=np.float64)
-    # Read on at most 100,000 evenly spread rows: float64 data fails at once, a scan's all pass.
-    rows = P[::max(1, len(P) // 100_000)]
-    if not len(P) or not np.array_equal(rows.astype(np.float32).astype(np.float64), rows):
-        return 0.0
-    return float(np.spacing(np.abs(P).max(axis=0).astype(np.float32)).max())
-
-
-def warn_coarse_float32(points: np.ndarray, spacing: float, source: str | None) -> None:
-    """Warn when float32 rounding of the coordinates is coarse against the point ``spacing``
-    (units): far from the origin (georeferenced scans) float32 keeps too few digits, and the
-    points snap to a grid that no fit can undo."""
-    step = float32_resolution(points)
-    if spacing > 0 and step >= COARSE_FLOAT32_SPACINGS * spacing:
-        warnings.warn(f"{source or 'input'}: the coordinates are float32 values rounded to {step:.3g} units, "
-                      f"{step / spacing:.2g} point spacings, so the surfaces blur; store them as float64 or "
-                      "subtract an offset (e.g. the cloud's centre) before saving", InputWarning, stacklevel=3)
