@@ -34,8 +34,6 @@ UNGUARDED = ("houghcad.batch() was called while a worker process of its local cl
              "(each worker runs the script again): put the call under `if __name__ == \"__main__\":`")
 #: Environment variable naming the file a worker creates when it refused to run a batch.
 MARKER = "HOUGHCAD_BATCH_UNGUARDED"
-#: Normals methods of the Segmenter (``preprocess`` checks them only once a cloud is read).
-NORMALS_METHODS = ("auto", "pca", "voting", "input")
 _OPTION_NAMES = {f.name for f in fields(SegmentOptions)}
 
 
@@ -129,6 +127,7 @@ def segment_options(options: dict[str, Any]) -> SegmentOptions:
     from .families import select
     from .options import MIN_MAX_POINTS, check_options
     from .pipeline import Segmenter
+    from .preprocess import NORMALS_METHODS  # preprocess checks them only once a cloud is read
 
     unknown = set(options) - _OPTION_NAMES
     if unknown:

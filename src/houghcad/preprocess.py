@@ -22,6 +22,9 @@ from .scales import link_scale, off_surface
 __all__ = ["ROWS", "Preprocessed", "Similarity", "by_rows", "pca_normals", "preprocess", "quadric_residuals",
            "rotation_to_z", "voting_normals"]
 
+#: The normal estimation methods a run takes ("input": the file's normals, required).
+NORMALS_METHODS = ("auto", "pca", "voting", "input")
+
 
 @dataclass(frozen=True)
 class Similarity:
@@ -413,8 +416,8 @@ def _choose_normals(x: np.ndarray, hood: _Neighbourhoods, normals: np.ndarray | 
         return nrm, hood.dist, hood.noise, "input", None
     if method == "input":
         raise InputError("normals method 'input' needs normals in the input")
-    if method not in ("auto", "pca", "voting"):
-        raise InputError(f"unknown normals method {method!r} (auto, pca, voting, input)")
+    if method not in NORMALS_METHODS:
+        raise InputError(f"unknown normals method {method!r} ({', '.join(NORMALS_METHODS)})")
     nrm, nbr, dist, noise, used = hood.normals, hood.nbr, hood.dist, hood.noise, "pca"
     widen = noise_policy == "noisy" or (noise_policy == "auto" and noise > WIDE_NORMALS_SPACINGS * hood.spacing)
     if method != "pca" and widen and len(x) > hood.k:
