@@ -179,8 +179,12 @@ def segment_edges(result: Result, points: np.ndarray) -> np.ndarray:
     # On a bounded even sample: which segments touch needs no scan's every point (all 3 M points
     # took 6.8 s, and the PNG, the PLY and the report each ask), only a segment of a few points
     # can drop out of it (and then share a neighbour's shade).
-    keep = np.linspace(0, len(pts) - 1, min(len(pts), EDGE_SAMPLE)).astype(np.int64)
-    pts, labels = pts[keep], result.labels()[keep]
+    labels = result.labels()
+    if len(pts) > EDGE_SAMPLE:
+        from .families._geometry import regular_indices
+
+        keep = regular_indices(len(pts), EDGE_SAMPLE)
+        pts, labels = pts[keep], labels[keep]
     sample = pts[:: max(1, len(pts) // 20000)]
     spacing = float(np.median(cKDTree(pts).query(sample, k=2)[0][:, 1]))
     return SegmentGraph.build(labels, pts, 2.5 * spacing).edges

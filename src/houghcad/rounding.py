@@ -21,13 +21,21 @@ __all__ = ["COARSE_FLOAT32_SPACINGS", "float32_resolution", "grid_step", "warn_c
 COARSE_FLOAT32_SPACINGS = 0.5
 
 
+#: Rows of a cloud the checks read at most, evenly spread: a rounding holds on every row.
+READ_ROWS = 100_000
+
+
+def _read_rows(P: np.ndarray) -> np.ndarray:
+    """At most :data:`READ_ROWS` rows of ``P`` (n, 3), evenly spread."""
+    return P[::max(1, len(P) // READ_ROWS)]
+
+
 def float32_resolution(points: np.ndarray) -> float:
     """The rounding step (units) of coordinates that went through float32, as a float32 PLY or
     PCD of a scan stores them: the float32 spacing at the largest magnitude of the coarsest axis
     when every coordinate of ``points`` (n, 3) is a float32 value, else 0 (float64 data)."""
     P = np.asarray(points, dtype=np.float64)
-    # Read on at most 100,000 evenly spread rows: float64 data fails at once, a scan's all pass.
-    rows = P[::max(1, len(P) // 100_000)]
+    rows = _read_rows(P)  # float64 data fails at once, a scan's rows all pass
     if not len(P) or not np.array_equal(rows.astype(np.float32).astype(np.float64), rows):
         return 0.0
     return float(np.spacing(np.abs(P).max(axis=0).astype(np.float32)).max())
@@ -41,7 +49,7 @@ def grid_step(points: np.ndarray, at_least: float = 0.0) -> float:
     faces, 60 times the time). The step is an axis's smallest gap between distinct values, and it
     counts when 99 % of the values are whole multiples of it away from the smallest."""
     P = np.asarray(points, dtype=np.float64)
-    rows = P[::max(1, len(P) // 100_000)]  # a grid holds on any rows; random values fail at once
+    rows = _read_rows(P)  # a grid holds on any rows; random values fail at once
     best = 0.0
     for v in rows.T:
         u = np.unique(v)
