@@ -507,6 +507,34 @@ def test_views_close_the_near_surface():
     assert radius > 1 and blue(radius) < min(0.01, blue(1) / 10)
 
 
+def test_views_close_gaps_and_keep_holes():
+    """With a depth slack the far side no longer shows through the near side's sampling gaps
+    (without it some pixels do), while a real hole, wider than the gaps, still shows it."""
+    from houghcad.render import GAP_SLACK, local_surface, splat, splat_radius
+
+    rng = np.random.default_rng(1)
+    near = np.c_[rng.uniform(-1, 1, (3000, 2)), np.full(3000, 0.5)]  # sparser than the far side
+    near = near[np.hypot(near[:, 0], near[:, 1]) > 0.3]  # a round hole 0.6 across
+    far = np.c_[rng.uniform(-1, 1, (8000, 2)), np.full(8000, -0.5)]
+    P = np.r_[near, far]
+    colours = np.r_[np.tile([[255, 0, 0]], (len(near), 1)), np.tile([[0, 0, 255]], (len(far), 1))].astype(np.uint8)
+    spacing, _ = local_surface(P)
+    size, half = 200, 1.2
+    radius = splat_radius(spacing, half, size)
+    yy, xx = np.mgrid[0:size, 0:size]
+    r = np.hypot(xx - (size - 1) / 2, yy - (size - 1) / 2) * 2 * half / (size - 1)
+    square = (np.abs(xx - (size - 1) / 2) < 0.8 * size / 2 / half) & (np.abs(yy - (size - 1) / 2) < 0.8 * size / 2 / half)
+
+    def blue(slack: float | None) -> tuple[float, float]:
+        img = splat(P[:, 0], P[:, 1], P[:, 2], colours, half, size, radius, slack=slack)
+        b = (img == [0, 0, 255]).all(axis=2)
+        return float(b[square & (r > 0.4)].mean()), float(b[r < 0.2].mean())
+
+    (gaps_before, hole_before), (gaps_after, hole_after) = blue(None), blue(GAP_SLACK * spacing)
+    assert gaps_before > 0.05 and gaps_after < gaps_before / 10
+    assert hole_before > 0.99 and hole_after >= hole_before
+
+
 def test_shading_tells_faces_apart_and_keeps_colours():
     from houghcad.render import LIGHT, shaded
 

@@ -19,8 +19,12 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 __all__ = ["render_png", "draw_sample", "principal_frame", "local_surface", "splat", "splat_radius", "shaded",
-           "LIGHT", "AMBIENT", "MAX_DRAWN_POINTS"]
+           "close_gaps", "LIGHT", "AMBIENT", "MAX_DRAWN_POINTS", "GAP_SLACK"]
 
+#: Depth, in point spacings, a drawn pixel may lie behind the surface around it before it counts
+#: as the far side seen through a gap (:func:`splat`): a surface turned 60 degrees from the view
+#: drops about 2.6 spacings across the reach of the closing; two faces of a part lie further apart.
+GAP_SLACK = 3.0
 #: Points drawn per view at most; more only slow drawing without a visible change.
 MAX_DRAWN_POINTS = 30_000
 
@@ -66,7 +70,7 @@ def _iso_basis() -> np.ndarray:
 
 
 def splat(u: np.ndarray, v: np.ndarray, depth: np.ndarray, colors: np.ndarray, half: float, size: int,
-          radius: int = 1, background: int = 255) -> np.ndarray:
+          radius: int = 1, background: int = 255, slack: float | None = None) -> np.ndarray:
     """Draw points as small squares into an RGB image, the nearest point winning each pixel.
 
     Parameters
@@ -82,6 +86,12 @@ def splat(u: np.ndarray, v: np.ndarray, depth: np.ndarray, colors: np.ndarray, h
         Image side in pixels.
     radius : int
         Each point covers ``(2 radius + 1)^2`` pixels.
+    slack : float, optional
+        Depth (world units) by which a pixel may lie behind the surface around it. Given, the
+        gaps of a sampled surface close: a pixel more than ``slack`` behind the depth map's
+        closing (a valley up to ``2 radius + 1`` pixels wide, about the distance to a point's 6th neighbour, see :func:`close_gaps`) shows the
+        far side through a gap between the near side's points, and takes the colour of the
+        nearest pixel that is not hidden.
 
     Returns
     -------
@@ -102,9 +112,42 @@ def splat(u: np.ndarray, v: np.ndarray, depth: np.ndarray, colors: np.ndarray, h
     # Per pixel, the nearest point: sort by pixel, then by decreasing depth, then by point.
     order = np.lexsort((point, -depth[point], pixel))
     first = np.unique(pixel[order], return_index=True)[1]
+    shown, winner = pixel[order][first], point[order][first]
     img = np.full((size * size, 3), background, dtype=np.uint8)
-    img[pixel[order][first]] = colors[point[order][first]]
-    return img.reshape(size, size, 3)
+    img[shown] = colors[winner]
+    img = img.reshape(size, size, 3)
+    if slack is None:
+        return img
+    zbuf = np.full(size * size, -np.inf)
+    zbuf[shown] = depth[winner]
+    return close_gaps(img, zbuf.reshape(size, size), radius, slack)
+
+
+def close_gaps(img: np.ndarray, zbuf: np.ndarray, reach: int, slack: float) -> np.ndarray:
+    """``img`` (H, W, 3) with the pixels that show a far surface through gaps of a near one
+    recoloured from the nearest visible pixel.
+
+    ``zbuf`` (H, W) is each pixel's depth (larger is nearer; -inf where no point is drawn). Its
+    grey closing by a disc ``2 reach + 1`` pixels wide fills the valleys narrower than that, the
+    gaps, and keeps the steps, the near surface's outline, and any hole wider than the disc
+    whole (a square would round off a round hole's rim): a pixel more than ``slack`` below the
+    closing is hidden. A gap with no point drawn in it at all is hidden too, and filled.
+    """
+    from scipy.ndimage import distance_transform_edt, grey_closing
+
+    d = np.arange(-reach, reach + 1)
+    disc = d[:, None] ** 2 + d[None, :] ** 2 <= reach * reach
+    cover = grey_closing(zbuf, footprint=disc, mode="constant", cval=-np.inf)
+    hidden = zbuf < cover - slack
+    if not hidden.any():
+        return img
+    source = np.isfinite(zbuf) & ~hidden
+    if not source.any():
+        return img
+    iy, ix = distance_transform_edt(~source, return_distances=False, return_indices=True)
+    out = img.copy()
+    out[hidden] = img[iy[hidden], ix[hidden]]
+    return out
 
 
 def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result, *,
@@ -160,7 +203,7 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
         for col, view in enumerate(views):
             ax = fig.add_subplot(2, 4, 4 * row + col + 1)
             _draw_view(ax, (P - centre) @ view.basis.T, shaded(colours[by], normals @ view.basis.T),
-                       view, by, panel, splat_radius(spacing, view.half, panel))
+                       view, by, panel, splat_radius(spacing, view.half, panel), GAP_SLACK * spacing)
     _legend(fig, result)
     if title is None:
         src = os.path.basename(result.source) if result.source else "point cloud"
@@ -238,15 +281,16 @@ def _views(half_ortho: float, half_iso: float) -> list[_View]:
     return views
 
 
-def _draw_view(ax: Axes, Q: np.ndarray, colors: np.ndarray, view: _View, by: str, panel: int, radius: int) -> None:
+def _draw_view(ax: Axes, Q: np.ndarray, colors: np.ndarray, view: _View, by: str, panel: int, radius: int,
+               slack: float) -> None:
     """Splat one view into ``ax``.
 
     ``Q`` (N, 3) are the drawn points in the view's basis (horizontal, vertical, towards the
     viewer), ``colors`` (N, 3) uint8, ``panel`` the image side in pixels, ``radius`` the splat
-    radius in pixels.
+    radius in pixels, ``slack`` the depth a pixel may lie behind its surroundings (:func:`splat`).
     """
     name, _, xl, yl, half = view
-    img = splat(Q[:, 0], Q[:, 1], Q[:, 2], colors, half, panel, radius)
+    img = splat(Q[:, 0], Q[:, 1], Q[:, 2], colors, half, panel, radius, slack=slack)
     ax.imshow(img, extent=(-half, half, -half, half), interpolation="nearest", origin="upper")
     ax.set_title(f"{name}, by {by}", fontsize=9)
     if xl is None:  # the isometric view has no meaningful axis values
