@@ -721,8 +721,29 @@ def test_view_writer_oserror_is_one_line(tmp_path, capsys, monkeypatch, fake_pip
 
     monkeypatch.setattr("houghcad.render.render_png", deny)
     assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "--png", str(tmp_path / "v.png")]) == 2
-    _assert_one_line_error(capsys, "v.png", "Permission denied")
+    out, err = capsys.readouterr()
+    # The result was written before the picture failed, and the output says so; stderr has one line.
+    assert f"wrote {tmp_path / 'r.json'}" in out and "v.png" not in out
+    assert err.count("\n") == 1 and err.startswith("houghcad: error: ") and "v.png" in err
+    assert "Permission denied" in err and "Traceback" not in err
     assert not (tmp_path / "v.png").exists()
+
+
+def test_outputs_are_announced_as_they_land(tmp_path, capsys, monkeypatch, fake_pipeline):
+    """The summary comes with the result file; each picture's line follows as soon as it is
+    written, before the next one starts (a big cloud's take seconds each)."""
+    inp = _write_xyz(tmp_path / "part.xyz", _blob())
+    seen = []
+
+    def draw(path, points, result):
+        seen.append(capsys.readouterr().out)  # what the user has read when the picture starts
+        Path(path).write_bytes(b"png")
+
+    monkeypatch.setattr("houghcad.render.render_png", draw)
+    ply, png = tmp_path / "v.ply", tmp_path / "v.png"
+    assert main(["segment", str(inp), "-o", str(tmp_path / "r.json"), "--ply", str(ply), "--png", str(png)]) == 0
+    assert f"wrote {tmp_path / 'r.json'}" in seen[0] and f"wrote {ply}" in seen[0] and "png" not in seen[0]
+    assert capsys.readouterr().out.strip() == f"wrote {png}"
 
 
 def test_no_merge_reaches_a_pipeline_that_merges(tmp_path, fake_pipeline):

@@ -211,25 +211,35 @@ def _progress_bar(quiet: bool):
 
 
 def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | None,
-                 report: Path | None) -> list[Path]:
-    """Write the optional coloured PLY, PNG views and HTML report; returns the paths written."""
+                 report: Path | None, done: Callable[[Path], None] = lambda path: None) -> list[Path]:
+    """Write the optional coloured PLY, PNG views and HTML report, calling ``done`` after each
+    (a big cloud's take seconds each); returns the paths written."""
     written = []
     if ply is not None:
         from .io.writers import write_result_ply
 
         _write(ply, lambda p, r: write_result_ply(p, cloud.points, r, cloud.fields), result)
         written.append(ply)
+        done(ply)
     if png is not None:
         from .render import render_png
 
         _write(png, lambda p, r: render_png(p, cloud.points, r), result)
         written.append(png)
+        done(png)
     if report is not None:
         from .htmlreport import write_html_report
 
         _write(report, lambda p, r: write_html_report(p, cloud.points, r), result)
         written.append(report)
+        done(report)
     return written
+
+
+def _wrote(quiet: bool) -> Callable[[Path], None]:
+    """Say that an output is written, as soon as it is: the result first, then the summary, then
+    each picture as it lands (a failure to write the result is the run's only line)."""
+    return lambda path: _print(f"wrote {path}", quiet)
 
 
 def _trace_dir(directory: Path, inp: Path) -> str:
@@ -259,7 +269,7 @@ def _report_dropped(cloud: PointCloud, inp: Path, quiet: bool) -> None:
 
 def _print(text: str, quiet: bool) -> None:
     if not quiet:
-        print(text)
+        print(text, flush=True)  # each "wrote" line as its file lands, through a pipe too
 
 
 def _load_family_files(paths: Sequence[str]) -> None:
@@ -351,10 +361,11 @@ def _segment(args: argparse.Namespace) -> int:
         _make_dir(prim.parent)
         _write(prim, write_fit4cad_primitives, result.faces())
         written.append(prim)
-    written += _write_views(cloud, result, views["ply"], views["png"], views["report"])
-
     _print(summary_table(result), args.quiet)
-    _print("\n".join(f"wrote {p}" for p in written), args.quiet)
+    wrote = _wrote(args.quiet)
+    for path in written:
+        wrote(path)
+    _write_views(cloud, result, views["ply"], views["png"], views["report"], wrote)
     return 0
 
 
@@ -374,10 +385,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     result = _run_segmentation(cloud, quiet=args.quiet)
     _make_dir(outdir)
     _write(out, write_json, result.to_dict())
-    written = [out] + _write_views(cloud, result, ply, png, report)
-
     _print(summary_table(result), args.quiet)
-    _print("\n".join(f"wrote {p}" for p in written), args.quiet)
+    wrote = _wrote(args.quiet)
+    wrote(out)
+    _write_views(cloud, result, ply, png, report, wrote)
     return 0
 
 
