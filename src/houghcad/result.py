@@ -106,13 +106,21 @@ class Segment(_ByValue):
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Segment":
+        """The segment of :meth:`to_dict`'s dict ``d``; ValueError naming the segment when its
+        (or a part's) ``params`` are missing (its ``n_points`` is checked by
+        :meth:`Result.from_dict`, after the indices' range). The ``type`` is any name: a
+        user-defined family's result is read where that family is not registered."""
+        sid, kind, indices = _whole(d["id"], "segment id"), str(d["type"]), _indices(d["indices"])
+        parts = [Part.from_dict(p) for p in d.get("parts", [])]
+        for j, given in enumerate(d.get("parts", [])):
+            _params(given, f"segment {sid}, part {j}")
         return cls(
-            id=int(d["id"]),
-            type=str(d["type"]),
-            indices=_indices(d["indices"]),
-            params=dict(d.get("params", {})),
+            id=sid,
+            type=kind,
+            indices=indices,
+            params=_params(d, f"segment {sid}"),
             mfe=float(d.get("mfe", float("nan"))),
-            parts=[Part.from_dict(p) for p in d.get("parts", [])],
+            parts=parts,
             descriptors=dict(d.get("descriptors", {})),
             edges=_indices(d.get("edge_indices", [])),
         )
@@ -149,6 +157,7 @@ class Part(_ByValue):
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Part":
+        # Its params and n_points are checked by Segment.from_dict, which can name the segment.
         return cls(indices=_indices(d["indices"]), params=dict(d.get("params", {})),
                    mfe=float(d.get("mfe", float("nan"))),
                    edges=_indices(d.get("edge_indices", [])))
@@ -283,7 +292,10 @@ class Result(_ByValue):
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Result":
         """The result of :meth:`to_dict`'s dict ``d``; ValueError for another format or a newer
-        version than this houghcad writes (:func:`check_header`)."""
+        version than this houghcad writes (:func:`check_header`), and for one that is not whole
+        (a hand edit): ids that are not the segments' positions, an index out of range, a count
+        (``n_points``) or parts that disagree with the indices, missing ``params``, a group of an
+        unknown kind or naming no segment. Unsorted index lists and members are read sorted."""
         check_header(d)
         n, segs = d["n_points"], d["segments"]
         if isinstance(n, bool) or not isinstance(n, int) or n < 0:
@@ -291,6 +303,11 @@ class Result(_ByValue):
         if not isinstance(segs, list):
             raise ValueError(f"segments must be a list, got {type(segs).__name__}")
         segments = [Segment.from_dict(s) for s in segs]
+        for pos, s in enumerate(segments):
+            # labels() and groups use ids as positions: a segment deleted by hand leaves a gap.
+            if s.id != pos:
+                raise ValueError(f"segment at position {pos} has id {s.id}: ids must be the segments' "
+                                 f"positions 0, 1, 2 ... (renumber them, and the groups' members)")
         given = "unsegmented" in d
         unsegmented = _indices(d.get("unsegmented", []))
         if not given:  # another writer may leave it out: the points no segment holds
@@ -299,6 +316,7 @@ class Result(_ByValue):
                 held[s.indices[(s.indices >= 0) & (s.indices < n)]] = True
             unsegmented = np.flatnonzero(~held).astype(np.int64)
         _check_partition(n, segments, unsegmented)
+        _check_counts(segs, segments)
         return cls(
             n_points=n,
             segments=segments,
@@ -306,7 +324,7 @@ class Result(_ByValue):
             timing=dict(d.get("timing", {})),
             options=dict(d.get("options", {})),
             source=d.get("source"),
-            groups=[Group.from_dict(g) for g in d.get("groups", [])],
+            groups=[_checked_group(i, g, len(segments)) for i, g in enumerate(d.get("groups", []))],
         )
 
     def to_json(self) -> str:
@@ -367,4 +385,49 @@ def _indices(values: Any) -> np.ndarray:
         raise ValueError(f"point indices must be whole numbers, got {arr.dtype} values")
     if arr.ndim != 1:
         raise ValueError("point indices must be a flat list")
-    return arr.astype(np.int64)
+    # Documented ascending (faces() hands them on as they are); no list is paired with them by
+    # position, so sorting a hand-edited one is harmless.
+    return np.sort(arr.astype(np.int64))
+
+
+def _whole(value: Any, what: str) -> int:
+    """``value`` when it is a whole number (not a bool, not 1.5 read as 1); ValueError otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{what} must be a whole number, got {value!r}")
+    return int(value)
+
+
+def _params(d: dict[str, Any], where: str) -> dict[str, Any]:
+    """The ``params`` of a segment's or part's dict ``d``; ValueError naming ``where`` when they are
+    missing or not an object (every writer records them; an empty object when unknown)."""
+    if "params" not in d:
+        raise ValueError(f"{where}: missing 'params' (an object, empty when unknown)")
+    if not isinstance(d["params"], dict):
+        raise ValueError(f"{where}: 'params' must be an object, got {type(d['params']).__name__}")
+    return dict(d["params"])
+
+
+def _check_counts(given: list[dict[str, Any]], segments: list[Segment]) -> None:
+    """ValueError naming the segment (or part) whose ``n_points`` in its dict is not its number
+    of indices; it may be left out (another writer's result: it is the length of ``indices``)."""
+    for d, s in zip(given, segments):
+        pieces = [(d, s.indices, f"segment {s.id}")]
+        pieces += [(p, q.indices, f"segment {s.id}, part {j}")
+                   for j, (p, q) in enumerate(zip(d.get("parts", []), s.parts))]
+        for raw, indices, where in pieces:
+            if "n_points" in raw and _whole(raw["n_points"], f"{where}: n_points") != len(indices):
+                raise ValueError(f"{where}: n_points {raw['n_points']} but {len(indices)} indices")
+
+
+def _checked_group(i: int, d: dict[str, Any], n_segments: int) -> Group:
+    """Group ``i`` of a result of ``n_segments`` segments from its dict ``d``; ValueError naming it
+    when its kind is unknown (the reports order and describe groups by kind) or a member is not a
+    segment id. Members are sorted, as documented."""
+    g = Group.from_dict(d)
+    if g.kind not in GROUP_KINDS:
+        raise ValueError(f"group {i}: unknown kind {g.kind!r} (one of {', '.join(GROUP_KINDS)})")
+    for m in d["members"]:
+        if not 0 <= _whole(m, f"group {i}: member") < n_segments:
+            raise ValueError(f"group {i}: member {m} is not a segment id (the result has {n_segments} segments)")
+    g.members.sort()
+    return g
