@@ -498,3 +498,19 @@ def test_batch_row_of_a_family_failing_in_the_run_has_the_same_line(tmp_path, el
     row = segment_cloud(CloudJob(str(elliptic_cylinder), "ellcyl.xyz", str(tmp_path), "ellcyl", ("json",), options))
     assert (row.status, row.error) == ("error", "family 'ecyl_bad': its valid(...) raised KeyError: 'zz'")
     assert "ecyl_bad" not in REGISTRY
+
+
+def test_an_exact_user_surface_retakes_its_slices_whatever_its_pose(families):
+    """An exact elliptic cylinder, posed so that simpler families first carve it into cylinder
+    slices: the user family's segment, refitted to the rounding, takes them all back (it was
+    left with 2,541 of 4,000 points and nine slices, as the pose's rounding fell)."""
+    define = families
+    define("ecyl_slices", x=a * sp.cos(v), y=b * sp.sin(v), z=u, params=[a, b], u_range=None,
+           v_range=(0, 2 * sp.pi), placement="extrusion", bounds={"a": (0.05, 1), "b": (0.05, 1)})
+    rng = np.random.default_rng(3)
+    pts, _ = synth.sample_parametric(lambda s, t: 0.9 * np.cos(t), lambda s, t: 0.5 * np.sin(t),
+                                     lambda s, t: s + 0 * t, (-1.0, 1.0), (0, 2 * np.pi), 4000, rng)
+    P = pts @ synth.random_rotation(rng).T
+    result = houghcad.segment(P, families=["simple", "ecyl_slices"], seed=0)
+    assert [(s.type, len(s.indices)) for s in result.segments] == [("ecyl_slices", 4000)]
+    assert sorted([result.segments[0].params["a"], result.segments[0].params["b"]]) == pytest.approx([0.5, 0.9])

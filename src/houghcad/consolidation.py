@@ -13,6 +13,7 @@ from scipy.sparse.csgraph import connected_components
 from .adjacency import smooth_adjacency
 from .context import Context
 from .families import Family
+from .families.base import regular_indices
 from .growth import accept
 from .recognize import candidates, inliers, recognize
 from .state import Candidate, SegmentView, Segmentation, mean_fitting_error
@@ -358,6 +359,11 @@ def merge_complex(seg: Segmentation, ctx: Context) -> None:
             if not nbrs:
                 continue
             got = _covered(c, [segs[j] for j in nbrs], ctx, own_fit=True)
+            if c.family.role != "simple" and len(got) < len(nbrs):
+                tight = _tightened(c, ctx)
+                more = _covered(tight, [segs[j] for j in nbrs], ctx, own_fit=True)
+                if len(more) > len(got):
+                    c, got = tight, more
             take = [(nbrs[k], q) for k, q, _ in got]
             rest = sorted(set(nbrs) - {j for j, _ in take})
             key = (len(c.indices), int(c.indices[0]), *(int(segs[j].indices[0]) for j in rest))
@@ -440,6 +446,22 @@ def _covered(c: Candidate, pieces: list[Candidate], ctx: Context, own_fit: bool 
                 continue
         out.append((j, Q[ok], d[ok]))
     return out
+
+
+def _tightened(c: Candidate | SegmentView, ctx: Context) -> Candidate:
+    """Complex segment ``c`` refitted by least squares on its own points.
+
+    Recognition stops refining an iterative fit once it lies within a fraction of τ of its
+    points (the trimmed refits' stop), so an exact sample's complex segment can still miss its
+    own surface by some 0.05 τ; the slices of that surface beyond its points then lie several
+    times further from it than from their own simpler primitives, and the cover test leaves
+    them. Refitted to the rounding, the segment covers them again."""
+    P, N = ctx.pre.points, ctx.pre.normals
+    sel = c.indices[regular_indices(len(c.indices), ctx.tol.recognition.refit_points)]
+    prim = c.family.fit(c.prim, P[sel], N[sel])
+    if prim is None or not c.family.valid(prim, ctx):
+        return _union(c, [c.indices], P)
+    return _union(replace(c, prim=prim), [c.indices], P)
 
 
 def _union(c: Candidate, parts: list[np.ndarray], P: np.ndarray) -> Candidate:
