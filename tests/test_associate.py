@@ -294,6 +294,31 @@ def test_hole_pattern_is_a_translation_group_without_the_boss():
     assert _kinds(a, "parallel") == [[0, 1, 2, 3, 4, 5]]
 
 
+def _small_holes(radii, noise=0.0):
+    """Through-holes of a 16 × 8 plate, 0.8 thick, at x = -6, -2, 2, 6 (exact samples of
+    houghcad.synth, or with Gaussian noise of that share of the diagonal)."""
+    rng = np.random.default_rng(17)
+    P, _ = synth.sample_plane_patch(rng, 6000, size=(16.0, 8.0))
+    blocks = [(P, _world_prim("plane", normal=Z, point=[0, 0, 0]))]
+    for x, r in zip((-6.0, -2.0, 2.0, 6.0), radii):
+        C, _ = synth.sample_cylinder(rng, 400, radius=r, height=0.8)
+        blocks.append((C + [x, 0, -0.4], _world_prim("cylinder", axis_point=[x, 0, -0.4], axis=Z, radius=r)))
+    diag = np.linalg.norm([16.0, 8.0, 0.8])
+    return [(b + rng.normal(0, noise * diag, b.shape), prim) for b, prim in blocks]
+
+
+def test_small_holes_of_different_radii_are_no_pattern_on_a_large_part():
+    # Radii 5 % apart, a thousandth of the diagonal: on exact points the fits know them far
+    # better than that, so the model's size sets no tolerance on them.
+    a = _associate(_small_holes([0.100, 0.105, 0.110, 0.115]))
+    assert not [g for g in a.groups_ if g.kind in ("translation", "rotation", "reflection")]
+    assert _kinds(a, "parallel") == [[1, 2, 3, 4]]
+    # Equal holes still are one, exact or noisy (then within the fits' noise).
+    for noise in (0.0, 0.0005):
+        b = _associate(_small_holes([0.1] * 4, noise))
+        assert _kinds(b, "translation") == [[1, 2, 3, 4]], noise
+
+
 def test_coaxial_cylinders_of_different_radii_are_related_not_merged():
     a = _associate([
         (_cyl([0, 0, 0], X, 0.5, 2.0, 1500), _world_prim("cylinder", axis_point=[0, 0, 0], axis=X, radius=0.5)),
@@ -326,6 +351,27 @@ def test_mirrored_cones_are_a_reflection_and_parallel_ones_a_translation():
                            _world_prim("plane", normal=Z, point=[0, 0, 3]))])
     assert _kinds(b, "translation") == [[0, 1]]
     assert not _kinds(b, "reflection") and not _kinds(b, "rotation")
+
+
+def test_mirror_normal_of_tilted_holes_comes_from_their_axes():
+    # Two holes tilted ±30° in the xz-plane, mirrored across x = 0. The second is sampled a
+    # little further along its axis (a trimmed face's points need not be symmetric): the
+    # feet of the point centroids no longer mirror each other, the axes still do exactly.
+    rng = np.random.default_rng(19)
+    t = np.radians(30.0)
+    floor = synth.sample_plane_patch(rng, 3000, size=(6.0, 3.0))[0]
+    blocks = [(floor, _world_prim("plane", normal=Z, point=[0, 0, 0]))]
+    for sx, shift in ((-1.0, 0.0), (1.0, 0.02)):
+        axis, base = np.array([-sx * np.sin(t), 0, np.cos(t)]), np.array([1.5 * sx, 0, 1.0])
+        C, _ = synth.sample_cylinder(rng, 1500, radius=0.3, height=2.0)
+        R = np.column_stack([np.cross([0, 1.0, 0], axis), [0, 1.0, 0], axis])  # local z → axis
+        hole = _world_prim("cylinder", axis_point=base, axis=axis, radius=0.3)
+        blocks.append(((C + [0, 0, shift]) @ R.T + base, hole))
+    a = _associate(blocks)
+    refl = [g for g in a.groups_ if g.kind == "reflection"]
+    assert [g.members for g in refl] == [[1, 2]]
+    n = refl[0].descriptors["mirror_normal"]
+    assert np.degrees(np.arccos(min(1.0, abs(n @ a._pre.transform.dirs(np.array(X)))))) < 1e-3
 
 
 def test_rotated_copies_are_a_rotation_group():

@@ -391,6 +391,7 @@ class Associator:
         # tolerance) / h radians: short holes get a looser angle tolerance.
         span = [e[0] if f is not None and f.kind != "plane" else e[2] for f, e in zip(frames, ext)]
         self._unc = [np.arctan2(self.tol.axis_lengths * self._L, max(h, _TINY)) for h in span]
+        fit = [self._mean_residual(it.family, it.prim, it.indices) for it in items]
         groups: list[RawGroup] = []
 
         # Congruent segments: one family, equal shape descriptors and extents.
@@ -404,7 +405,8 @@ class Associator:
 
             def congruence(i, j):
                 tol_e = np.maximum(self._E, self.tol.extent_tol * np.maximum(ext[i], ext[j]))
-                return max(self._shape_distance(fam, shapes[i], shapes[j], self._L, self._A),
+                L = self._fit_length(fit[i], fit[j])
+                return max(self._shape_distance(fam, shapes[i], shapes[j], L, self._A),
                            float(np.max(np.abs(ext[i] - ext[j]) / tol_e)))
 
             D = _pairwise(ks, congruence)
@@ -446,6 +448,18 @@ class Associator:
                 groups.append(RawGroup("parallel", members, {key: _mean_direction([frames[m] for m in members])}))
         return groups
 
+    def _fit_length(self, r1: float, r2: float) -> float:
+        """Tolerance on equal lengths of two fits whose mean point distances are r1, r2.
+
+        A fit's radius is known about as well as its points lie on it: noisy
+        points or a few points of a neighbour loosen it, exact points make it
+        exact. A floor on the model's size would let small holes of different
+        radii on a large part pass for equal ones.
+        """
+        if self.tol.length_tol is not None:
+            return self._L
+        return self.tol.fit_residuals * max(r1, r2, _TINY)
+
     def _atol(self, i: int, j: int) -> float:
         """Angle tolerance between the axes of items i and j (set by :meth:`_relations`)."""
         return self._A + max(self._unc[i], self._unc[j])
@@ -479,7 +493,17 @@ class Associator:
 
     def _mirror(self, s1, s2, frames, piv, oriented) -> dict | None:
         """The plane mirror exchanging two sets of congruent segments, if any:
-        normal along the line joining their pivots' centroids, through its middle."""
+        through the middle of their pivots' centroids, normal along the line
+        joining them; reported with the normal its directions give.
+
+        A mirror of unit normal n maps a direction d to d − 2(d·n)n, so the two
+        sets' directions d1, d2 differ along n: n ∥ d1 − d2. The fitted axes and
+        normals are exact on exact points, while the pivots (feet of the points'
+        centroids on the axes) slide along the axes with the sampling and tilt
+        the normal drawn through them. An unoriented direction leaves two
+        bisector planes, d1 ∓ d2: the pivots choose. Directions too close to
+        tell a bisector keep the pivots' normal.
+        """
         c1 = np.mean([piv[m] for m in s1], axis=0)
         c2 = np.mean([piv[m] for m in s2], axis=0)
         if np.linalg.norm(c2 - c1) < self.tol.mirror_lengths * self._L:
@@ -493,6 +517,7 @@ class Associator:
         def reflect_pt(p):
             return p - 2.0 * ((p - mid) @ m) * m
 
+        d1 = _mean_direction([frames[k] for k in s1])
         d2 = _mean_direction([frames[k] for k in s2])
         for k in s1:
             if _angle(reflect_dir(frames[k].direction), d2, oriented) > max(self._atol(k, j) for j in s2):
@@ -503,6 +528,10 @@ class Associator:
                 p = reflect_pt(piv[k])
                 if min(np.linalg.norm(p - piv[j]) for j in b) > tol:
                     return None
+        chords = (d1 - d2, d1 + d2)[: 1 if oriented else 2]
+        chord = max(chords, key=lambda v: abs(v @ m) / max(np.linalg.norm(v), _TINY))
+        if np.linalg.norm(chord) > 2.0 * np.sin(self._A / 2):
+            m = unit(chord if chord @ m >= 0 else -chord)
         return {"mirror_normal": m, "mirror_point": mid}
 
 

@@ -331,10 +331,15 @@ class AssociationTolerances:
 
     angle_tol: float = tol(2.0, "degrees", "largest angle between parallel axes or normals, and between equal "
                            "half-angles")
-    length_tol: float | None = tol(None, "diagonals", "largest difference between equal lengths; None: from τ, at "
-                                   "least length_floor")
-    length_floor: float = tol(0.002, "diagonals", "the least length tolerance")
-    length_taus: float = tol(0.5, "τ", "the length tolerance follows the inlier distance")
+    length_tol: float | None = tol(None, "diagonals", "largest difference between equal lengths and positions; "
+                                   "None: positions from τ, at least length_floor, and shapes from fit_residuals")
+    length_floor: float = tol(0.002, "diagonals", "the least tolerance on positions (axis lines, pivots), which "
+                              "depend on how the points are spread over a face, and on same-surface proposals")
+    length_taus: float = tol(0.5, "τ", "the position tolerance follows the inlier distance")
+    fit_residuals: float = tol(2.0, "mean residuals", "lengths of congruent shapes (radii ...) differ by at most "
+                               "this many of the looser fit's mean point distance: a fit knows its radius about as "
+                               "well as its points lie on it, so exact fits agree closely and noisy ones within "
+                               "their noise (2 × 0.8 σ ≈ τ/2)")
     relative_tol: float = tol(0.02, "share of the value", "lengths may also differ by this")
     extent_tol: float = tol(0.1, "share of the value", "extents are equal within this: they come from the points, "
                             "not a fit")
