@@ -194,6 +194,58 @@ def test_png_views(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["views.png"]
 
 
+def _part_with_strays(strays: int, far: float = 5000.0) -> tuple[np.ndarray, Result]:
+    """A block about 16 units across segmented by its ground truth, its top face left unsegmented
+    (it still belongs to the part), then ``strays`` unsegmented points ``far`` units off (a
+    scanner's outliers)."""
+    from houghcad import synth
+
+    cloud = synth.block_with_hole_and_slot(seed=0, n_points=4000)
+    lab = np.asarray(cloud.labels).copy()
+    top = max(range(lab.max() + 1), key=lambda k: cloud.points[lab == k, 2].mean())
+    lab[lab == top] = -1
+    d = np.random.default_rng(3).normal(size=(strays, 3))
+    pts = np.r_[cloud.points, cloud.points.mean(axis=0) + far * d / np.linalg.norm(d, axis=1)[:, None]]
+    lab = np.r_[lab, np.full(strays, -1)]
+    segs = [Segment(k, p["type"], np.flatnonzero(lab == k), {}, 0.0) for k, p in enumerate(cloud.primitives)
+            if k != top]
+    segs = [Segment(i, s.type, s.indices, {}, 0.0) for i, s in enumerate(segs)]  # ids 0, 1, ...
+    return pts, Result(len(lab), segs, np.flatnonzero(lab < 0))
+
+
+def test_views_frame_the_part_not_far_strays(monkeypatch):
+    from houghcad import render
+    from houghcad.render import framed_points
+
+    clean, clean_res = _part_with_strays(0)
+    pts, res = _part_with_strays(5)
+    n = len(clean)
+    # The unsegmented top face is part of the part; the strays are not.
+    np.testing.assert_array_equal(framed_points(pts, res.labels()), np.arange(n + 5) < n)
+    assert framed_points(clean, clean_res.labels()).all()
+    assert framed_points(pts, np.full(n + 5, -1)).all()  # nothing segmented: frame every point
+    edge = clean[:, 2] >= clean[:, 2].max() - 1e-9
+    assert (clean_res.labels()[edge] < 0).all()  # the extreme points are unsegmented ones
+    # Read on a sample (a big cloud's), the others going with their nearest: the same.
+    monkeypatch.setattr(render, "FRAME_SAMPLE", 500)
+    np.testing.assert_array_equal(framed_points(pts, res.labels()), np.arange(n + 5) < n)
+
+
+def test_png_frames_the_part_not_far_strays(tmp_path):
+    """The part with 5 points 5000 units off draws as the part alone (it was a dot)."""
+    clean, clean_res = _part_with_strays(0)
+    pts, res = _part_with_strays(5)
+    render_png(tmp_path / "clean.png", clean, clean_res, title="t")
+    render_png(tmp_path / "strays.png", pts, res, title="t")
+    # The panels, without the title and the legend (the unsegmented count differs).
+    a, b = (_png_pixels(tmp_path / f)[80:760] for f in ("clean.png", "strays.png"))
+    # Coloured pixels: drawn points (the background, axes and labels are grey).
+    drawn_a, drawn_b = (~(x == x[..., :1]).all(axis=2) for x in (a, b))
+    assert drawn_a.mean() > 0.05  # the part covers the panels
+    assert abs(drawn_b.mean() - drawn_a.mean()) < 0.01 * drawn_a.mean()
+    assert (a != b).any(axis=2).mean() < 0.01  # same frame, same axes: the same picture
+
+
 def test_png_failure_leaves_nothing(tmp_path, monkeypatch):
     from matplotlib.figure import Figure
 
@@ -270,6 +322,21 @@ def test_html_report_size_for_50k_points():
     size = len(text.encode("utf-8"))
     # 12 bytes of float32 and 3 of int8 normals per point, base64: ~1.05 MB, far below 15 MB
     assert size < 20 * n + 200_000
+
+
+def test_html_report_frames_the_part_not_far_strays():
+    """The view's centre and radius are the part's, as without the 5 points 5000 units off, and
+    the viewer frames the first ``framed`` points: the part's, the strays last."""
+    clean, clean_res = _part_with_strays(0)
+    pts, res = _part_with_strays(5)
+    a, b = (_embedded(build_html_report(p, r)) for p, r in ((clean, clean_res), (pts, res)))
+    np.testing.assert_allclose(b["radius"], a["radius"], rtol=1e-12)
+    np.testing.assert_allclose(b["centre"], a["centre"], rtol=0, atol=1e-9)
+    assert a["radius"] < 20 and a["framed"] == a["n_drawn"] == len(clean)
+    assert b["framed"] == len(clean) and b["n_drawn"] == len(pts)
+    xyz = np.frombuffer(base64.b64decode(b["xyz"]), dtype="<f4").reshape(3, -1).T
+    assert (np.linalg.norm(xyz[:b["framed"]], axis=1) <= b["radius"] * (1 + 1e-6)).all()
+    assert (np.linalg.norm(xyz[b["framed"]:], axis=1) > 4000).all()
 
 
 def test_html_report_subsamples_huge_clouds():

@@ -21,7 +21,10 @@ Layout of the embedded data (``<script type="application/json" id="houghcad-data
 the drawn points are sorted by segment (unsegmented last) so that each segment
 is one contiguous range; ``xyz`` holds the x, then y, then z offsets from
 ``centre`` as little-endian float32, base64-encoded; ``traces`` lists the
-ranges in order with their colours per colouring mode.
+ranges in order with their colours per colouring mode.  The view frames the
+first ``framed`` points, the part (:func:`houghcad.render.framed_points`), with
+``centre`` and ``radius`` from their bounding box: stray unsegmented points far
+from the part come last and may lie outside the view.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ import numpy as np
 
 from .palette import (UNSEGMENTED_COLOR, group_color, hex_color, segment_colors, segment_edges, type_color,
                       types_present)
-from .render import AMBIENT, LIGHT, draw_sample, local_surface
+from .render import AMBIENT, LIGHT, draw_sample, framed_points, local_surface
 from .report import group_sentence
 from .result import GROUP_KINDS, Result
 
@@ -126,12 +129,14 @@ def _payload(points: np.ndarray, result: Result, max_points: int, seg_rgb: np.nd
     """The JSON object the page's script reads (see the module docstring)."""
     sel = draw_sample(len(points), max_points)
     lab = result.labels()[sel]
+    # Framed on the part, as the PNG views: a few strays far off shrank it to a dot.
+    keep = framed_points(points[sel], lab)
     n_seg = len(result.segments)
-    key = np.where(lab < 0, n_seg, lab)  # unsegmented last
-    order = np.argsort(key, kind="stable")
+    key = np.where(lab < 0, n_seg, lab)  # unsegmented last, and the strays after the framed ones
+    order = np.lexsort((~keep, key))
     P = points[sel][order]
     counts = np.bincount(key, minlength=n_seg + 1)
-    lo, hi = points.min(axis=0), points.max(axis=0)
+    lo, hi = points[sel][keep].min(axis=0), points[sel][keep].max(axis=0)
     centre = (lo + hi) / 2.0
     # float32 offsets from the centre keep ~7 significant digits of the extent even
     # when the coordinates carry a large common offset.
@@ -148,7 +153,7 @@ def _payload(points: np.ndarray, result: Result, max_points: int, seg_rgb: np.nd
                    "color_segment": hex_color(UNSEGMENTED_COLOR), "color_type": hex_color(UNSEGMENTED_COLOR),
                    "color_group": hex_color(UNSEGMENTED_COLOR), "groups": []})
     return {
-        "n_points": int(result.n_points), "n_drawn": int(len(sel)),
+        "n_points": int(result.n_points), "n_drawn": int(len(sel)), "framed": int(keep.sum()),
         "centre": [float(c) for c in centre],
         "xyz": base64.b64encode(planar.tobytes()).decode("ascii"),
         "traces": traces,

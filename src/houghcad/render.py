@@ -17,9 +17,11 @@ from .result import Result
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+    from scipy.spatial import cKDTree
 
-__all__ = ["render_png", "draw_sample", "principal_frame", "local_surface", "splat", "splat_radius", "shaded",
-           "close_gaps", "LIGHT", "AMBIENT", "MAX_DRAWN_POINTS", "GAP_SLACK"]
+__all__ = ["render_png", "draw_sample", "framed_points", "principal_frame", "local_surface", "splat",
+           "splat_radius", "shaded", "close_gaps", "LIGHT", "AMBIENT", "MAX_DRAWN_POINTS", "GAP_SLACK",
+           "MIN_FRAMED", "FRAME_REACH", "FRAME_SAMPLE"]
 
 #: Depth, in point spacings, a drawn pixel may lie behind the surface around it before it counts
 #: as the far side seen through a gap (:func:`splat`): a surface turned 60 degrees from the view
@@ -44,21 +46,104 @@ def draw_sample(n: int, limit: int = MAX_DRAWN_POINTS, seed: int = 0) -> np.ndar
     return np.sort(np.random.default_rng(seed).choice(n, size=limit, replace=False)).astype(np.int64)
 
 
-def principal_frame(points: np.ndarray) -> np.ndarray:
-    """Coordinates of ``points`` (N, 3) in their principal frame, shape (N, 3), same units.
+#: Segmented points needed before the views frame on the part they outline (:func:`framed_points`):
+#: fewer say too little about where the part is, and every point is framed.
+MIN_FRAMED = 10
+#: Longest neighbour link, as a share of the segmented points' bounding-box diagonal, that still
+#: joins a point to the framed part (:func:`framed_points`): well above any point spacing, far
+#: below the distance of a scanner's stray points from the part.
+FRAME_REACH = 0.05
+#: Points on which :func:`framed_points` reads the part's extent at most; the others go with
+#: their nearest sample point (all 200,000 points of a report took 3 s, a sample 0.4 s).
+FRAME_SAMPLE = 20_000
 
-    Centred on the bounding-box centre; axes by decreasing variance, each
-    signed so that its largest component is positive (deterministic).  CAD parts
-    are usually aligned with these axes, so the three views show faces edge-on.
+
+def framed_points(points: np.ndarray, labels: np.ndarray, k: int = 8) -> np.ndarray:
+    """Which points the views frame on: the part, not a few stray points far from it.
+
+    A scanner's outliers far from the part (left unsegmented, rightly) set the bounding box, and
+    the part shrank to a dot in the pictures.  The part is what the segments hold, with the
+    unsegmented points joined to it through neighbours (an edge, an unfitted patch); a point not
+    so joined lies outside the views and is clipped.  The PNG views and the report both frame so.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3)
+        The drawn points, any units.
+    labels : ndarray of int, shape (N,)
+        Segment of each point, -1 unsegmented (:meth:`Result.labels`).
+    k : int
+        Neighbours per point that may join it to the part.
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+        The points of the connected pieces of the ``k``-nearest-neighbour graph of (a sample of
+        :data:`FRAME_SAMPLE` of) the points, its links no longer than a reach (:func:`_linked`),
+        that hold a segmented point; a point off the sample goes with its nearest sample point
+        within the reach.  Every point when fewer than :data:`MIN_FRAMED` are segmented, or all are.
     """
-    c = (points.min(axis=0) + points.max(axis=0)) / 2.0
-    q = points - c
+    from scipy.spatial import cKDTree
+
+    from .normals import tree_query
+
+    seg = np.asarray(labels) >= 0
+    n = len(points)
+    s = draw_sample(n, FRAME_SAMPLE)
+    if seg[s].sum() < MIN_FRAMED or seg.all():
+        return np.ones(n, dtype=bool)
+    tree = cKDTree(points[s])
+    keep_s, reach = _linked(tree, points[s], seg[s], k)
+    if len(s) == n:
+        return keep_s
+    dist, near = tree_query(tree, points, k=1, distance_upper_bound=reach)
+    found = np.isfinite(dist)
+    keep = np.zeros(n, dtype=bool)
+    keep[found] = keep_s[near[found]]
+    keep[s] = keep_s
+    return keep
+
+
+def _linked(tree: cKDTree, points: np.ndarray, seg: np.ndarray, k: int) -> tuple[np.ndarray, float]:
+    """Which of ``points`` (N, 3), ``tree``'s, are linked to a ``seg`` (N,) bool point through
+    ``k``-nearest-neighbour links no longer than the reach, shape (N,) bool; and the reach, in the
+    points' units: :data:`FRAME_REACH` of the ``seg`` points' diagonal, at least 3 times the
+    median distance to the ``k``-th neighbour (a sparse cloud stays linked)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from .normals import tree_query
+
+    n = len(points)
+    k = min(k, n - 1)
+    dist, nbr = tree_query(tree, points, k=k + 1)  # column 0: the point itself
+    span = float(np.linalg.norm(points[seg].max(axis=0) - points[seg].min(axis=0)))
+    reach = max(FRAME_REACH * span, 3.0 * float(np.median(dist[:, -1])))
+    link = dist[:, 1:] <= reach
+    rows = np.broadcast_to(np.arange(n)[:, None], link.shape)[link]
+    graph = coo_matrix((np.ones(len(rows), dtype=np.int8), (rows, nbr[:, 1:][link])), shape=(n, n))
+    _, piece = connected_components(graph, directed=False)
+    return np.isin(piece, piece[seg]), reach
+
+
+def principal_frame(points: np.ndarray, framed: np.ndarray | None = None) -> np.ndarray:
+    """Coordinates of ``points`` (N, 3) in the principal frame of ``points[framed]`` (default:
+    all of them), shape (N, 3), same units.
+
+    Centred on the framed points' bounding-box centre; axes by decreasing variance, each
+    signed so that its largest component is positive (deterministic).  CAD parts
+    are usually aligned with these axes, so the three views show faces edge-on; the
+    frame is the part's (:func:`framed_points`), stray points far off would tilt it.
+    """
+    ref = points if framed is None else points[framed]
+    c = (ref.min(axis=0) + ref.max(axis=0)) / 2.0
+    q = ref - c
     _, vecs = np.linalg.eigh(q.T @ q)
     axes = vecs[:, ::-1]
     axes *= np.sign(axes[np.argmax(np.abs(axes), axis=0), np.arange(3)])
     if np.linalg.det(axes) < 0:  # keep a right-handed frame so views are not mirrored
         axes[:, 2] *= -1.0
-    return q @ axes
+    return (points - c) @ axes
 
 
 def _iso_basis() -> np.ndarray:
@@ -172,7 +257,8 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
     segment (a shade of the type colour each); the columns are three
     orthographic views along the principal axes of the cloud
     (:func:`principal_frame`) and an isometric view in that frame.  A legend
-    lists the types present and the unsegmented points.
+    lists the types present and the unsegmented points.  Frame and extent are
+    the part's (:func:`framed_points`): stray points far from it are left out.
     """
     # A bare Figure (no pyplot) prints through the Agg canvas: headless, and the
     # caller's pyplot backend and global state are left alone.
@@ -184,10 +270,12 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
     if pts.ndim != 2 or pts.shape != (result.n_points, 3):
         raise ValueError(f"points must have shape ({result.n_points}, 3), got {pts.shape}")
     sel = draw_sample(len(pts), max_points)
-    P = principal_frame(pts[sel])
+    # Framed on the part: points outside the views (strays far off) are clipped by splat.
+    keep = framed_points(pts[sel], result.labels()[sel])
+    P = principal_frame(pts[sel], keep)
     colours = {by: point_colors(result, by, pts)[sel] for by in ("type", "segment")}
     spacing, normals = local_surface(P)
-    lo, hi = P.min(axis=0), P.max(axis=0)
+    lo, hi = P[keep].min(axis=0), P[keep].max(axis=0)
     centre = (lo + hi) / 2.0
     # Half the side of a view, with a margin: the largest half-extent for the
     # orthographic views, the half-diagonal for the isometric one.
@@ -208,6 +296,8 @@ def render_png(path: str | os.PathLike[str], points: np.ndarray, result: Result,
     if title is None:
         src = os.path.basename(result.source) if result.source else "point cloud"
         shown = "" if len(sel) == len(pts) else f", {len(sel)} drawn"
+        if not keep.all():  # say so: the views do not show every point
+            shown += f", {int((~keep).sum())} stray{'s' if (~keep).sum() > 1 else ''} far off not shown"
         title = (f"{src}: {len(result.segments)} segments, {result.n_points} points{shown} "
                  "(u1, u2, u3: principal axes of the cloud)")
     fig.suptitle(title, fontsize=11)

@@ -62,7 +62,7 @@
   gl.clearColor(1, 1, 1, 1);
 
   // ---------------------------------------------------------------- camera (z up, orbit about the centre)
-  var R = D.radius, FOV = 30 * Math.PI / 180;
+  var R = D.radius, FOV = 30 * Math.PI / 180, nFramed = D.framed === undefined ? n : D.framed;
   var cam = {};
   // The view's share the part fills when it is framed (its farthest projected point).
   var FILL = 0.92;
@@ -82,18 +82,19 @@
     return [t / Math.max(aspect, 1), t * Math.min(aspect, 1)];
   }
   function fitDistance() {
-    // The nearest camera distance at which every drawn point projects within FILL of the
-    // view: a point at (x, y) across the view and z toward the camera needs
-    // dist >= z + max(sx |x|, sy |y|) / FILL. The part, not its bounding sphere, fills the view.
+    // The nearest camera distance at which every framed point (the first D.framed: the part,
+    // not the strays far off) projects within FILL of the view: a point at (x, y) across the
+    // view and z toward the camera needs dist >= z + max(sx |x|, sy |y|) / FILL. The part, not
+    // its bounding sphere, fills the view.
     var a = axes(cam.az, cam.el), s = scales(), best = 1e-9 * R, front = -R;
-    for (var i = 0; i < n; i++) {
+    for (var i = 0; i < nFramed; i++) {
       var p = [xyz[i], xyz[n + i], xyz[2 * n + i]], z = -dot(p, a.f);
       var d = z + Math.max(s[0] * Math.abs(dot(p, a.r)), s[1] * Math.abs(dot(p, a.u))) / FILL;
       if (d > best) best = d;
       if (z > front) front = z;
     }
     // The nearest point stays in front of the near plane.
-    return n ? Math.max(best, front + 0.05 * R) : R / Math.sin(FOV / 2);
+    return nFramed ? Math.max(best, front + 0.05 * R) : R / Math.sin(FOV / 2);
   }
   function frame() {  // eye, right, up, forward (world, offsets from the centre)
     if (cam.fit === null) cam.fit = fitDistance();  // when framed (home, a new size); zoom with the wheel
