@@ -589,6 +589,19 @@ def test_validate_points_messages_without_source():
     _assert_error("mem", e, "non-numeric")
 
 
+def test_non_finite_points_name_the_way_out_only_when_read_from_a_file(tmp_path, cloud):
+    # An array handed in has no --drop-invalid to name; a file read by read_points has.
+    pts = cloud[0].copy()
+    pts[3, 1] = np.nan
+    with pytest.raises(InputError, match=r"^mem: NaN coordinate at point 4 of \d+$"):
+        validate_points(pts, "mem")
+    path = tmp_path / "holes.xyz"
+    np.savetxt(path, pts)
+    with pytest.raises(InputError, match=r"NaN coordinate at point 4 of \d+ \(.*--drop-invalid.*\)$"):
+        read_points(path)
+    assert len(read_points(path, drop_invalid=True)) == len(pts) - 1
+
+
 def test_validate_points_returns_float64(cloud):
     pts = validate_points(cloud[0].astype(np.float32), "x")
     assert pts.dtype == np.float64 and pts.flags.c_contiguous

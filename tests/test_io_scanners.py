@@ -75,8 +75,10 @@ def test_nan_rows_are_refused_unless_dropped(tmp_path):
     path = tmp_path / "organised.pcd"
     _write_pcd(path, {"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2], "intensity": np.arange(N, dtype=float)},
                "binary")
-    with pytest.raises(InputError, match="NaN coordinate at point 6 of 400"):
+    with pytest.raises(InputError, match="NaN coordinate at point 6 of 400") as e:
         read_points(path)
+    # The refusal names the way out, for the CLI's user and read_points's caller alike, on one line.
+    assert "--drop-invalid" in str(e.value) and "drop_invalid=True" in str(e.value) and "\n" not in str(e.value)
     cloud = read_points(path, drop_invalid=True)
     assert cloud.dropped == 3 and len(cloud.points) == N - 3
     assert len(cloud.fields["intensity"]) == N - 3 and 5 not in cloud.fields["intensity"]
@@ -157,7 +159,10 @@ def test_cli_drop_invalid_says_how_many(tmp_path, capsys, monkeypatch):
     _write_pcd(path, {"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2]}, "ascii")
     _stub_pipeline(monkeypatch)
     assert main(["segment", str(path), "-o", str(tmp_path / "a.json")]) == 2
-    assert "infinite coordinate at point 1 of 400" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "infinite coordinate at point 1 of 400" in err
+    assert "--drop-invalid, or drop_invalid=True in read_points, leaves such rows out" in err
+    assert len(err.strip().splitlines()) == 1
     assert main(["segment", str(path), "-o", str(tmp_path / "b.json"), "--drop-invalid"]) == 0
     assert "left out 4 points with a NaN or infinite coordinate" in capsys.readouterr().err
 

@@ -42,26 +42,37 @@ def float32_resolution(points: np.ndarray) -> float:
 
 
 def grid_step(points: np.ndarray, at_least: float = 0.0) -> float:
-    """The step (units) of a grid that every coordinate of ``points`` (n, 3) lies on, the coarsest
-    axis's, when it is at least ``at_least``; else 0. A LAS file stores integers times its scale
-    (often 1 mm), a text export its decimals: a grid near the point spacing snaps the surfaces
+    """The step (units) of a grid that every coordinate of ``points`` (n, 3) lies on, on every axis
+    that varies, when it is at least ``at_least``; else 0. A LAS file stores integers times its
+    scale (often 1 mm), a text export its decimals: a grid near the point spacing snaps the surfaces
     into rows that no fit undoes (on a gear at 1 mm against 0.55 mm spacing: 421 segments for 16
-    faces, 60 times the time). The step is an axis's smallest gap between distinct values, and it
-    counts when 99 % of the values are whole multiples of it away from the smallest."""
+    faces, 60 times the time). An axis's step is its smallest gap between distinct values, and it
+    counts when 99 % of the values are whole multiples of it away from the smallest.
+
+    Rounding by storage hits every axis, while regular sampling along one axis (scan lines, a
+    profiler's stage steps, slices) puts that axis alone on a grid and blurs nothing: so each axis
+    that varies must lie on a grid, and the step is the finest of theirs, the grid they all share
+    (a sampling axis's steps are whole multiples of the storage's). An axis with a single value (a
+    flat part lying in z = const) lies on any grid, so it neither shows nor rules out a rounding
+    and the other axes decide."""
     P = np.asarray(points, dtype=np.float64)
     rows = _read_rows(P)  # a grid holds on any rows; random values fail at once
-    best = 0.0
+    steps = []
     for v in rows.T:
         u = np.unique(v)
         gaps = np.diff(u)
         gaps = gaps[gaps > 1e-12 * max(float(np.abs(u).max()), 1e-300)]  # float64's own rounding
-        if not len(gaps) or gaps.min() < max(at_least, best):
-            continue
+        if not len(gaps):
+            continue  # a constant axis
         q = float(gaps.min())
+        if q < at_least:
+            return 0.0  # this axis is finer than asked for, so the grid they share is too
         k = (u - u[0]) / q
-        if np.mean(np.abs(k - np.round(k)) < 1e-3) >= 0.99:
-            best = q
-    return best
+        if np.mean(np.abs(k - np.round(k)) < 1e-3) < 0.99:
+            return 0.0  # an axis off any grid: what grids the others have is sampling, not rounding
+        steps.append(q)
+    # One varying axis alone is a line along it (refused as collinear): no rounding to tell.
+    return min(steps) if len(steps) >= 2 else 0.0
 
 
 def warn_coarse_coordinates(points: np.ndarray, spacing: float, source: str | None) -> None:

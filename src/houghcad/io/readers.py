@@ -274,7 +274,7 @@ def read_points(path: str | os.PathLike[str], fmt: str | None = None, *, scan: i
         keep = _finite_rows(points) if drop_invalid else None
         if keep is not None:
             points, normals, fields = _take(points, normals, fields, keep)
-        points, normals = validate_points(points, source, normals, return_normals=True)
+        points, normals = validate_points(points, source, normals, return_normals=True, non_finite_hint=DROP_HINT)
     cloud = PointCloud(points=points, normals=normals, source=source, fields=fields, scan=scan,
                        drop_invalid=bool(drop_invalid))
     if keep is not None:
@@ -357,12 +357,20 @@ def detect_format(source: str, data: bytes) -> str:
     )
 
 
+#: How a file's NaN or inf rows are left out, in the one-line error that refuses them: scanners
+#: mark missing points so (an organised PCD's every empty cell), and the error reaches both the
+#: CLI's user and a caller of :func:`read_points`, so it names the option for each.
+DROP_HINT = "scanners mark missing points so; --drop-invalid, or drop_invalid=True in read_points, " \
+    "leaves such rows out"
+
+
 def validate_points(
     points: np.ndarray,
     source: str | None,
     normals: np.ndarray | None = None,
     *,
     return_normals: bool = False,
+    non_finite_hint: str = "",
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray | None]:
     """Check that ``points`` can be segmented.
 
@@ -376,6 +384,9 @@ def validate_points(
         Only looked at when ``return_normals`` is true; see :func:`clean_normals`.
     return_normals : bool
         Return ``(points, normals)`` instead of just the points.
+    non_finite_hint : str
+        Appended in parentheses to the NaN or inf error: how the caller can leave such rows out
+        (:func:`read_points` names its ``drop_invalid`` and the CLI's ``--drop-invalid``).
 
     Returns
     -------
@@ -409,7 +420,8 @@ def validate_points(
     if not finite.all():
         first = int(np.flatnonzero(~finite)[0])
         kind = "NaN" if np.isnan(pts[first]).any() else "infinite"
-        raise InputError(f"{name}: {kind} coordinate at point {first + 1} of {n}")
+        hint = f" ({non_finite_hint})" if non_finite_hint else ""
+        raise InputError(f"{name}: {kind} coordinate at point {first + 1} of {n}{hint}")
     if n < MIN_POINTS:
         raise InputError(f"{name}: only {n} point{'' if n == 1 else 's'}, at least {MIN_POINTS} are needed")
 
