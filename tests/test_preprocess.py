@@ -366,6 +366,26 @@ def test_exact_samples_are_told_from_noise_of_a_twentieth_of_a_spacing(name):
     assert not preprocess(synth.PARTS[name](seed=0, n_points=n, noise=0.0003).points).exact
 
 
+@pytest.mark.parametrize("rows, incidence", [(2.0, 0.0), (3.0, 0.0), (2.0, 50.0), (1.0, 50.0)])
+def test_noise_of_a_scan_sampled_in_rows_is_read(rows: float, incidence: float):
+    """A plane scanned in rows ``rows`` times further apart than the points along them, with
+    noise along the scanner's ray (``incidence`` degrees from the normal, tilted along the rows):
+    a point's 3 nearest neighbours lie on its row, coplanar with it whatever the noise, and the
+    cloud read as an exact sample (σ 0, every surface cut into slivers). Its noise is the ray
+    noise's normal part."""
+    rng = np.random.default_rng(0)
+    x, y = np.meshgrid(np.arange(0.0, 1.0, 0.01), np.arange(0.0, 1.0, 0.01 * rows))
+    P = np.c_[x.ravel(), y.ravel(), np.zeros(x.size)]
+    ray = np.array([np.sin(np.radians(incidence)), 0.0, np.cos(np.radians(incidence))])
+    sigma = 0.003
+    P = P + rng.normal(0.0, sigma, (len(P), 1)) * ray
+    P = P @ synth.random_rotation(rng).T
+    pre = preprocess(P)
+    assert not pre.exact
+    normal_part = sigma * np.cos(np.radians(incidence))
+    assert 0.7 < pre.noise / pre.transform.scale / normal_part < 1.3
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_low_noise_on_small_faces_is_read_near_its_value(seed):
     # The bracket's narrow faces put two surfaces in 8 and 16 neighbours: at σ = 0.08 spacings

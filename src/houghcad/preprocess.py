@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 from .errors import InputError
 from .hough import direction_accumulator, refine_direction
 from .noise import NOISY_SPACINGS
+from .scanrows import ROWS_SHARE, on_rows, spread_quadruples
 from .noise import choose as choose_policy
 from .normals import ROWS, by_rows, pca_normals, quadric_residuals, tree_query, voting_normals
 from .scales import link_scale, off_surface
@@ -199,6 +200,9 @@ WIDE_NORMALS_MAX = 64
 #: and the bound's factor: the quantile is 1 / 16 of σ under Gaussian noise up to 0.3 spacings.
 QUADRUPLE_QUANTILE = 0.1
 QUADRUPLE_SIGMAS = 16.0
+#: Below this share of points with such a quadruple the quadruple tests are left out: the
+#: neighbourhoods are lines (rows further apart than the 16 nearest reach).
+QUADRUPLE_MIN_SPREAD = 0.05
 #: Exact samples: a quarter or more of the 4-point plane residuals under this many spacings
 #: (rounding; under noise the 25th percentile is above 0.01 spacings from σ = 0.07 spacings on).
 EXACT_QUADRUPLE_SPACINGS = 0.002
@@ -325,18 +329,18 @@ def _neighbourhoods(x: np.ndarray, k: int, workers: int = 1) -> _Neighbourhoods:
     dist, nbr = tree_query(tree, x, workers, k=k)
     nrm, ev = pca_normals(x, nbr, workers)
     spacing = float(np.median(dist[:, 1]))
-    noise, qres, exact = _noise_estimate(x, nbr, ev, k, spacing, workers)
+    noise, qres, exact = _noise_estimate(x, nbr, ev, nrm, k, spacing, workers)
     return _Neighbourhoods(tree=tree, k=k, dist=dist, nbr=nbr, normals=nrm, noise=noise, spacing=spacing,
                            qres=qres, exact=exact)
 
 
-def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
+def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, nrm: np.ndarray, k: int,
                     spacing: float, workers: int = 1) -> tuple[float, np.ndarray | None, bool]:
     """Robust noise σ of a cloud (its units), the quadric residuals (n,) when k > 8 (else None), and
     whether the samples are exact (:attr:`Preprocessed.exact`; tested when k > 4).
 
-    ``nbr`` (n, k) are the neighbourhoods, ``ev`` (n, 3) their covariance eigenvalues (ascending)
-    and ``spacing`` the median nearest-neighbour distance. The k-neighbour PCA residual is bounded
+    ``nbr`` (n, k) are the neighbourhoods, ``ev`` (n, 3) their covariance eigenvalues (ascending),
+    ``nrm`` (n, 3) their PCA normals and ``spacing`` the median nearest-neighbour distance. The k-neighbour PCA residual is bounded
     by smaller-neighbourhood estimates that sharp or thin clean features do not inflate.
     """
     noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
@@ -364,7 +368,12 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, k: int,
         # give (their 25th percentile is above 0.01 spacing from sigma = 0.07
         # spacing on, synthetic planes to tori). There the median quadruple
         # residual, about a third of sigma, bounds the noise.
-        r4 = np.sqrt(np.maximum(pca_normals(x, nbr[:, :4], workers)[1][:, 0], 0))
+        quads, spread = nbr[:, :4], np.ones(len(x), dtype=bool)
+        if on_rows(x, nbr, nrm).mean() >= ROWS_SHARE:
+            quads, spread = spread_quadruples(x, nbr, nrm)
+            if spread.mean() < QUADRUPLE_MIN_SPREAD:
+                return noise, qres, False  # no patch around most points: no quadruple tells
+        r4 = np.sqrt(np.maximum(pca_normals(x, quads[spread], workers)[1][:, 0], 0))
         q_low, q25, q50 = np.quantile(r4, [QUADRUPLE_QUANTILE, 0.25, 0.5])
         exact = bool(q25 < EXACT_QUADRUPLE_SPACINGS * spacing)
         if exact:
