@@ -48,6 +48,9 @@ class Kind:
     category: str
     name: str
     perturbation: Perturbation
+    #: The clean cloud sampled this many times denser before the perturbation (scan rows keep a
+    #: twentieth of the points).
+    density: int = 1
 
 
 P = Perturbation
@@ -78,6 +81,11 @@ PART_KINDS: tuple[Kind, ...] = (
     Kind("noise + missing parts", "σ 0.5 %, 30 % missing", P(gaussian=0.005, missing=0.3)),
     Kind("local deformation", "3 bumps 2 % high", P(bumps=0.02)),
     *(Kind("outliers", f"{x:.0%} of the points", P(outliers=x)) for x in (0.05, 0.2, 0.3)),
+    # Beyond SHREC, as the outliers: a scanner's rows, 10 spacings of a 20 times denser sample
+    # apart and about 2 along them: the clean part's number of points, in rows 1:5.
+    Kind("scan rows", "rows 1:5", P(rows=10.0, row_band=0.05), density=20),
+    Kind("scan rows", "rows 1:5, σ 0.1 % along the normal", P(rows=10.0, row_band=0.05, normal_noise=0.001),
+         density=20),
 )
 
 
@@ -112,7 +120,8 @@ def run_part(args: tuple[str, int, int, int]) -> dict[str, Any]:
     from houghcad import synth
     from houghcad.evaluate import classification_measures
 
-    cloud = synth.perturb(synth.PARTS[name](seed=seed, n_points=n_points), PART_KINDS[k].perturbation, seed=seed)
+    kind = PART_KINDS[k]
+    cloud = synth.perturb(synth.PARTS[name](seed=seed, n_points=n_points * kind.density), kind.perturbation, seed=seed)
     t = time.perf_counter()
     res = houghcad.segment(cloud.points, seed=0)
     dt = time.perf_counter() - t

@@ -111,3 +111,26 @@ def test_bad_perturbations_are_refused(kwargs):
 def test_describe_names_what_differs():
     assert Perturbation().describe() == "clean"
     assert Perturbation(gaussian=0.005, missing=0.3).describe() == "gaussian=0.005, missing=0.3"
+
+
+def test_scan_rows_keep_bands_of_a_dense_sample_and_normal_noise_stays_on_the_normal(flat):
+    """Rows: the kept points lie in parallel bands a twentieth of their gap wide, a twentieth of
+    the points, and along a row closer than the rows are apart. Noise along the normal moves a
+    plane's points off it only along z."""
+    from houghcad.preprocess import _neighbourhoods, _unit_cube
+    from houghcad.scanrows import on_rows
+
+    dense = synth.single("plane", 2, n_points=80000, pose=False)
+    q = perturb(dense, Perturbation(rows=10.0, row_band=0.05), seed=3)
+    assert 0.035 < len(q.points) / len(dense.points) < 0.065
+    assert np.abs(q.points[:, 2]).max() < 1e-12  # a subset of the plane's points, unmoved
+    x = _unit_cube(q.points)[2]
+    h = _neighbourhoods(x, 16)
+    assert on_rows(x, h.nbr, h.normals).mean() > 0.3
+    noisy = perturb(flat, Perturbation(normal_noise=0.002), seed=3)
+    order_a, order_b = np.lexsort(flat.points[:, :2].T), np.lexsort(noisy.points[:, :2].T)
+    np.testing.assert_allclose(noisy.points[order_b, :2], flat.points[order_a, :2])
+    assert 0.5 < np.std(noisy.points[:, 2]) / (0.002 * synth.primitives._bbox_diag(flat.points)) < 1.5
+    with pytest.raises(ValueError, match="row_band"):
+        Perturbation(rows=5.0, row_band=0.0)
+

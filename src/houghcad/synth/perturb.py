@@ -5,7 +5,7 @@ A :class:`Perturbation` is applied to a clean :class:`~houghcad.synth.SynthCloud
 :func:`perturb`, which returns a new cloud (the input is not modified) with the ground truth kept in
 step: removed points leave with their labels, outliers are added with label -1. The stages run in
 the order a scanner would produce them: the surface is deformed (bumps), then sampled (uneven
-density, undersampling, holes), then measured (noise), then polluted (outliers).
+density, scan rows, undersampling, holes), then measured (noise), then polluted (outliers).
 
 Every stage draws from its own child stream of ``seed``, so switching one stage on does not move
 what the others do.
@@ -55,6 +55,17 @@ class Perturbation:
     outliers : float in [0, 1)
         Fraction of the final cloud made of uniform points in the bounding box grown by 10 % of
         the diagonal on every side (label -1).
+    rows : float
+        Scan rows (beyond SHREC): only the points within bands ``row_band`` × the gap wide are
+        kept, the bands ``rows`` point spacings apart (the clean cloud's median nearest-neighbour
+        distance, not the diagonal) across a random direction: a scanner's rows. Along a row the
+        kept points are about ``1 / (row_band · rows)`` spacings apart, so a clean cloud sampled
+        densely (10 times the points at the defaults below) gives rows closer along them than
+        they are apart.
+    row_band : float in (0, 1]
+    normal_noise : float
+        σ of Gaussian noise along each point's true normal (a range scanner's noise at normal
+        incidence), fraction of the diagonal; unlike isotropic noise it leaves the rows rows.
     """
 
     gaussian: float = 0.0
@@ -67,9 +78,14 @@ class Perturbation:
     n_bumps: int = 3
     bump_width: float = 0.04
     outliers: float = 0.0
+    rows: float = 0.0
+    row_band: float = 0.1
+    normal_noise: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("gaussian", "uniform", "bumps", "bump_width"):
+        if not 0.0 < self.row_band <= 1.0:
+            raise ValueError(f"row_band must be in (0, 1], got {self.row_band!r}")
+        for name in ("gaussian", "uniform", "bumps", "bump_width", "rows", "normal_noise"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         _check_fraction("missing", self.missing)
@@ -88,7 +104,8 @@ class Perturbation:
 
 
 def _streams(seed: int) -> list[np.random.Generator]:
-    kids = np.random.SeedSequence([int(seed), zlib.crc32(b"perturb")]).spawn(6)
+    # A new stage takes a new child: the first ones, and what the older stages do, stay as they were.
+    kids = np.random.SeedSequence([int(seed), zlib.crc32(b"perturb")]).spawn(7)
     return [np.random.default_rng(k) for k in kids]
 
 
@@ -113,6 +130,17 @@ def _holes(points: Array, fraction: float, n_holes: int, rng: np.random.Generato
     return keep
 
 
+def _rows(points: Array, gap: float, band: float, rng: np.random.Generator) -> Array:
+    """Boolean keep-mask (N,) of the points within ``band`` × the gap of parallel planes ``gap``
+    point spacings apart, across a direction (and at a phase) drawn from ``rng``."""
+    from scipy.spatial import cKDTree
+
+    spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
+    d = rng.standard_normal(3)
+    t = points @ (d / np.linalg.norm(d)) / (gap * spacing) + rng.random()
+    return np.abs(t - np.round(t)) <= band / 2.0
+
+
 def uneven_keep(points: Array, uneven: float, rng: np.random.Generator) -> Array:
     """Which of the points (n, 3) an uneven sampling keeps, bool (n,): each with a probability
     falling linearly from 1 to ``1 - uneven`` along a direction drawn from ``rng`` across the
@@ -133,7 +161,7 @@ def perturb(cloud: SynthCloud, p: Perturbation, seed: int = 0) -> SynthCloud:
     """
     if len(cloud.points) == 0:
         raise ValueError("cannot perturb an empty cloud")
-    g_bump, g_sample, g_holes, g_noise, g_out, g_perm = _streams(seed)
+    g_bump, g_sample, g_holes, g_noise, g_out, g_perm, g_rows = _streams(seed)
     diag = _bbox_diag(cloud.points)
     pts = np.array(cloud.points, dtype=np.float64, copy=True)
     nrm = np.array(cloud.normals, dtype=np.float64, copy=True)
@@ -144,6 +172,8 @@ def perturb(cloud: SynthCloud, p: Perturbation, seed: int = 0) -> SynthCloud:
     keep = np.ones(len(pts), bool)
     if p.uneven > 0:
         keep &= uneven_keep(pts, p.uneven, g_sample)
+    if p.rows > 0:
+        keep &= _rows(pts, p.rows, p.row_band, g_rows)
     if p.missing > 0:
         keep &= _holes(pts, p.missing, p.holes, g_holes)
     idx = np.flatnonzero(keep)
@@ -158,6 +188,9 @@ def perturb(cloud: SynthCloud, p: Perturbation, seed: int = 0) -> SynthCloud:
         a = p.uniform * diag
         pts += g_noise.uniform(-a, a, pts.shape)
         var += a * a / 3.0
+    if p.normal_noise > 0:
+        pts += g_noise.normal(0.0, p.normal_noise * diag, (len(pts), 1)) * nrm
+        var += (p.normal_noise * diag) ** 2
     if p.outliers > 0:
         n_out = int(round(p.outliers / (1.0 - p.outliers) * len(pts)))
         lo = pts.min(axis=0) - 0.1 * diag
