@@ -21,13 +21,20 @@ ROWS_SHARE = 0.2
 QUADRUPLE_APART_DEG = 40.0
 
 
+def _directions(x: np.ndarray, points: np.ndarray | slice, nbr: np.ndarray, nrm: np.ndarray) -> np.ndarray:
+    """Unit directions (m, j, 3) from ``x[points]`` to their neighbours ``nbr`` (m, j), in the
+    tangent planes of their normals ``nrm`` (m, 3)."""
+    d = (x[nbr] - x[points, None, :]).astype(np.float32)
+    d -= np.einsum("ikj,ij->ik", d, nrm)[:, :, None] * nrm[:, None, :]
+    d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-30)
+    return d
+
+
 def on_rows(x: np.ndarray, nbr: np.ndarray, nrm: np.ndarray) -> np.ndarray:
     """Whether each point's 3 nearest neighbours (of ``nbr`` (n, k), nearest first) lie on one
     line through it, within :data:`ROW_DEG` about its normal ``nrm`` (n, 3), shape (n,): the
     point is on a scan's row, sampled closer along it than the rows are apart."""
-    d = x[nbr[:, 1:4]] - x[:, None, :]
-    d -= np.einsum("ikj,ij->ik", d, nrm)[:, :, None] * nrm[:, None, :]  # into the tangent plane
-    d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-30)
+    d = _directions(x, slice(None), nbr[:, 1:4], nrm)
     near = np.sin(np.radians(ROW_DEG))
     return np.all([np.linalg.norm(np.cross(d[:, i], d[:, j]), axis=1) <= near
                    for i, j in ((0, 1), (0, 2), (1, 2))], axis=0)
@@ -52,9 +59,7 @@ def spread_quadruples(x: np.ndarray, nbr: np.ndarray, nrm: np.ndarray, rows: int
     for lo in range(0, n, rows):
         r = slice(lo, min(lo + rows, n))
         nb, nz = nbr[r, 1:], nrm[r]
-        d = (x[nb] - x[r, None, :]).astype(np.float32)
-        d -= np.einsum("ikj,ij->ik", d, nz)[:, :, None] * nz[:, None, :]  # into the tangent plane
-        d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-30)
+        d = _directions(x, r, nb, nz)
         rr = np.arange(len(nb))
         line_a = d[:, 0]  # the nearest neighbour's direction
         apart_a = np.linalg.norm(np.cross(d, line_a[:, None, :]), axis=2) >= off
