@@ -200,8 +200,9 @@ WIDE_NORMALS_MAX = 64
 #: and the bound's factor: the quantile is 1 / 16 of σ under Gaussian noise up to 0.3 spacings.
 QUADRUPLE_QUANTILE = 0.1
 QUADRUPLE_SIGMAS = 16.0
-#: Below this share of points with such a quadruple the quadruple tests are left out: the
-#: neighbourhoods are lines (rows further apart than the 16 nearest reach).
+#: On a cloud sampled in rows (:mod:`houghcad.scanrows`), below this share of points with a
+#: quadruple across the rows the quadruple tests are left out: the rows lie further apart than
+#: the 16 nearest reach, and no quadruple spans the surface.
 QUADRUPLE_MIN_SPREAD = 0.05
 #: Exact samples: a quarter or more of the 4-point plane residuals under this many spacings
 #: (rounding; under noise the 25th percentile is above 0.01 spacings from σ = 0.07 spacings on).
@@ -340,8 +341,9 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, nrm: np.ndar
     whether the samples are exact (:attr:`Preprocessed.exact`; tested when k > 4).
 
     ``nbr`` (n, k) are the neighbourhoods, ``ev`` (n, 3) their covariance eigenvalues (ascending),
-    ``nrm`` (n, 3) their PCA normals and ``spacing`` the median nearest-neighbour distance. The k-neighbour PCA residual is bounded
-    by smaller-neighbourhood estimates that sharp or thin clean features do not inflate.
+    ``nrm`` (n, 3) their PCA normals and ``spacing`` the median nearest-neighbour distance. The
+    k-neighbour PCA residual is bounded by smaller-neighbourhood estimates that sharp or thin
+    clean features do not inflate.
     """
     noise = float(np.median(np.sqrt(np.maximum(ev[:, 0], 0))))
     qres, exact = None, False
@@ -372,7 +374,7 @@ def _noise_estimate(x: np.ndarray, nbr: np.ndarray, ev: np.ndarray, nrm: np.ndar
         if on_rows(x, nbr, nrm).mean() >= ROWS_SHARE:
             quads, spread = spread_quadruples(x, nbr, nrm)
             if spread.mean() < QUADRUPLE_MIN_SPREAD:
-                return noise, qres, False  # no patch around most points: no quadruple tells
+                return noise, qres, False  # no quadruple spans the surface: none tells
         r4 = np.sqrt(np.maximum(pca_normals(x, quads[spread], workers)[1][:, 0], 0))
         q_low, q25, q50 = np.quantile(r4, [QUADRUPLE_QUANTILE, 0.25, 0.5])
         exact = bool(q25 < EXACT_QUADRUPLE_SPACINGS * spacing)
