@@ -211,29 +211,24 @@ def _progress_bar(quiet: bool):
 
 
 def _write_views(cloud: PointCloud, result: Any, ply: Path | None, png: Path | None,
-                 report: Path | None, done: Callable[[Path], None] = lambda path: None) -> list[Path]:
+                 report: Path | None, done: Callable[[Path], None] = lambda path: None) -> None:
     """Write the optional coloured PLY, PNG views and HTML report, calling ``done`` after each
-    (a big cloud's take seconds each); returns the paths written."""
-    written = []
+    (a big cloud's take seconds each)."""
     if ply is not None:
         from .io.writers import write_result_ply
 
         _write(ply, lambda p, r: write_result_ply(p, cloud.points, r, cloud.fields), result)
-        written.append(ply)
         done(ply)
     if png is not None:
         from .render import render_png
 
         _write(png, lambda p, r: render_png(p, cloud.points, r), result)
-        written.append(png)
         done(png)
     if report is not None:
         from .htmlreport import write_html_report
 
         _write(report, lambda p, r: write_html_report(p, cloud.points, r), result)
-        written.append(report)
         done(report)
-    return written
 
 
 def _wrote(quiet: bool) -> Callable[[Path], None]:

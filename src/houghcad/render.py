@@ -174,9 +174,9 @@ def splat(u: np.ndarray, v: np.ndarray, depth: np.ndarray, colors: np.ndarray, h
     slack : float, optional
         Depth (world units) by which a pixel may lie behind the surface around it. Given, the
         gaps of a sampled surface close: a pixel more than ``slack`` behind the depth map's
-        closing (a valley up to ``2 radius + 1`` pixels wide, about the distance to a point's 6th neighbour, see :func:`close_gaps`) shows the
-        far side through a gap between the near side's points, and takes the colour of the
-        nearest pixel that is not hidden.
+        closing (a valley up to ``2 radius + 1`` pixels wide, about the distance to a point's
+        6th neighbour, see :func:`close_gaps`) shows the far side through a gap between the near
+        side's points, and takes the colour of the nearest pixel that is not hidden.
 
     Returns
     -------
